@@ -1,0 +1,6 @@
+//! The photometric (pixel brightness) feature of the PoVS baseline and its Jacobian.
+//!
+//! **Not implemented yet**: this crate has no API until issue #4 lands (see
+//! `docs/ARCHITECTURE.md` for what it will hold). It exists so that the workspace has
+//! its final shape and the crate name is reserved.
+#![deny(missing_docs)]

@@ -1,0 +1,21 @@
+#![doc = include_str!("../README.md")]
+#![deny(missing_docs)]
+
+mod batch;
+mod camera;
+mod error;
+mod intrinsics;
+pub mod io;
+pub mod model;
+mod real;
+mod region;
+pub mod se3;
+
+pub use batch::{PixelGrid, PixelJacobian};
+pub use camera::Camera;
+pub use error::UcmError;
+pub use intrinsics::{Distortion, Intrinsics, Params};
+pub use model::OutOfView;
+pub use real::Real;
+pub use region::{Annulus, Mask, ValidRegion};
+pub use se3::{Isometry3, Twist};

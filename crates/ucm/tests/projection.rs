@@ -1,0 +1,247 @@
+//! Projection, unprojection, validity, the pinhole special case, the fixture camera
+//! and the real Mei calibration.
+
+use crate::common::*;
+use proptest::prelude::*;
+use ucm::{Camera, Intrinsics, OutOfView, ValidRegion};
+
+proptest! {
+    /// unproject ∘ project is the identity on the unit sphere, for every valid point.
+    #[test]
+    fn unproject_of_project_is_the_ray(
+        camera in prop_oneof![camera_strategy(false), camera_strategy(true)],
+        seed in point_strategy(1.0),
+    ) {
+        let xi = camera.intrinsics().xi;
+        // Rescale the angle to the camera's domain.
+        let rho = (seed[0] * seed[0] + seed[1] * seed[1] + seed[2] * seed[2]).sqrt();
+        let theta = (seed[2] / rho).acos() / 1.0 * max_off_axis(xi);
+        let phi = seed[1].atan2(seed[0]);
+        let p = [rho * theta.sin() * phi.cos(), rho * theta.sin() * phi.sin(), rho * theta.cos()];
+        // Beyond the fold of a random distortion polynomial there is no projection.
+        prop_assume!(camera.project_unbounded(p).is_ok());
+        let pixel = camera.project_unbounded(p).unwrap();
+        let ray = camera.unproject(pixel).unwrap();
+        for k in 0..3 {
+            prop_assert!((ray[k] - p[k] / rho).abs() < 1e-9, "{ray:?} vs {p:?}/{rho}");
+        }
+    }
+
+    /// project ∘ unproject is the identity on pixels of the image.
+    #[test]
+    fn project_of_unproject_is_the_pixel(
+        camera in camera_strategy(false),
+        u in 0.0..639.0f64,
+        v in 0.0..479.0f64,
+        range in 0.5..40.0f64,
+    ) {
+        let Ok(ray) = camera.unproject([u, v]) else {
+            // Only possible beyond the ξ > 1 domain.
+            prop_assert!(camera.intrinsics().xi > 1.0);
+            return Ok(());
+        };
+        let back = camera.project([ray[0] * range, ray[1] * range, ray[2] * range]).unwrap();
+        prop_assert!((back[0] - u).abs() < 1e-8 && (back[1] - v).abs() < 1e-8, "{back:?} vs {u} {v}");
+    }
+
+    /// The same with Mei's distortion (iterative undistortion), on pixels where the
+    /// distortion is invertible.
+    #[test]
+    fn project_of_unproject_with_distortion(
+        camera in camera_strategy(true),
+        u in 0.0..639.0f64,
+        v in 0.0..479.0f64,
+    ) {
+        if let Ok(ray) = camera.unproject([u, v]) {
+            let back = camera.project(ray).unwrap();
+            prop_assert!((back[0] - u).abs() < 1e-7 && (back[1] - v).abs() < 1e-7, "{back:?} vs {u} {v}");
+        }
+    }
+
+    /// With ξ = 0 the model is the pinhole.
+    #[test]
+    fn xi_zero_is_the_pinhole(p in point_strategy(1.2), au in 100.0..500.0f64, av in 100.0..500.0f64) {
+        let intrinsics = Intrinsics { alpha_u: au, alpha_v: av, u0: 320.0, v0: 240.0, xi: 0.0, skew: 0.0 };
+        let camera = Camera::new(intrinsics, None, 640, 480, ValidRegion::Full).unwrap();
+        let [u, v] = camera.project_unbounded(p).unwrap();
+        prop_assert!((u - (au * p[0] / p[2] + 320.0)).abs() < 1e-9);
+        prop_assert!((v - (av * p[1] / p[2] + 240.0)).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn out_of_view_reasons() {
+    let para = Camera::new(
+        Intrinsics {
+            alpha_u: 100.0,
+            alpha_v: 100.0,
+            u0: 320.0,
+            v0: 240.0,
+            xi: 0.9,
+            skew: 0.0,
+        },
+        None,
+        640,
+        480,
+        ValidRegion::Annulus(ucm::Annulus {
+            center_px: [320.0, 240.0],
+            inner_radius_px: 10.0,
+            outer_radius_px: 200.0,
+        }),
+    )
+    .unwrap();
+    // ξ = 0.9 sees down to Z/ρ > −0.9: straight behind is not seen.
+    assert_eq!(
+        para.project([0.0, 0.0, -1.0]),
+        Err(OutOfView::BehindViewpoint)
+    );
+    assert_eq!(
+        para.project([0.0, 0.0, 0.0]),
+        Err(OutOfView::BehindViewpoint)
+    );
+    assert_eq!(
+        para.project([f64::NAN, 0.0, 1.0]),
+        Err(OutOfView::BehindViewpoint)
+    );
+    // On the axis: the centre of the annulus, masked (the robot).
+    assert_eq!(para.project([0.0, 0.0, 2.0]), Err(OutOfView::OutsideRegion));
+    // Far off the axis: out of the image.
+    assert_eq!(para.project([0.0, 1.0, -0.7]), Err(OutOfView::OutsideImage));
+    assert!(para.project([1.0, 0.0, 0.2]).is_ok());
+
+    // ξ = 1.5: the projection is one-to-one only where ξ Z/ρ > −1.
+    let wide = Camera::new(
+        Intrinsics {
+            alpha_u: 100.0,
+            alpha_v: 100.0,
+            u0: 320.0,
+            v0: 240.0,
+            xi: 1.5,
+            skew: 0.0,
+        },
+        None,
+        640,
+        480,
+        ValidRegion::Full,
+    )
+    .unwrap();
+    assert_eq!(
+        wide.project_unbounded([0.0, 1.0, -1.0]),
+        Err(OutOfView::OutsideXiDomain)
+    );
+    assert!(wide.project_unbounded([0.0, 1.0, -0.6]).is_ok());
+    // And a pixel beyond the fold has no lifting.
+    assert_eq!(
+        wide.unproject([320.0 + 100.0 * 1.0, 240.0]),
+        Err(OutOfView::OutsideXiDomain)
+    );
+}
+
+#[test]
+fn fixture_camera_geometry() {
+    let camera = fixture_320();
+    let xi = camera.intrinsics().xi;
+    assert!((0.8..=1.0).contains(&xi));
+    let off_nadir = |theta_deg: f64| {
+        let t = theta_deg.to_radians();
+        camera.project([t.sin(), 0.0, t.cos()]).map(|_| ())
+    };
+    // The nadir is masked (the robot), the ground from ~50° off the nadir is seen, the
+    // horizon is seen, up to ~120° (30° above the horizon), not beyond.
+    assert_eq!(off_nadir(0.0), Err(OutOfView::OutsideRegion));
+    assert_eq!(off_nadir(48.0), Err(OutOfView::OutsideRegion));
+    assert!(off_nadir(52.0).is_ok());
+    assert!(off_nadir(90.0).is_ok());
+    assert!(off_nadir(118.0).is_ok());
+    assert!(off_nadir(122.0).is_err());
+    // Every azimuth of the annulus fits in the image.
+    for k in 0..360 {
+        let a = f64::from(k).to_radians();
+        let t = 119.0f64.to_radians();
+        assert!(
+            camera
+                .project([t.sin() * a.cos(), t.sin() * a.sin(), t.cos()])
+                .is_ok(),
+            "azimuth {k}"
+        );
+    }
+    // The 640×480 benchmark camera is the same camera.
+    let large = Camera::load_toml(root().join("fixtures/omni-640x480.toml")).unwrap();
+    assert_eq!(large, camera.rescaled(2).unwrap());
+    let p = [1.0f64, 2.0, 0.3];
+    let a = camera.project(p).unwrap();
+    let b = large.project(p).unwrap();
+    assert!(((a[0] + 0.5) * 2.0 - 0.5 - b[0]).abs() < 1e-9);
+}
+
+/// The real Mei calibration: ξ ≈ 1.52, distortion and skew.
+#[test]
+fn mei_calibration_loads_and_projects_inside_its_crop() {
+    let Some(data) = data_dir() else { return };
+    let path = data.join("catadioptric/omniunwarp-mei.yaml");
+    let camera = Camera::load_mei_yaml(&path, 1230, 1000, ValidRegion::Full).unwrap();
+    let i = camera.intrinsics();
+    assert!((i.xi - 1.518_101_310_566_618_8).abs() < 1e-12);
+    assert!(
+        (i.alpha_u - 471.350290197278).abs() < 1e-9 && (i.skew - 0.9326437725584913).abs() < 1e-12
+    );
+    let d = camera.distortion().unwrap();
+    assert!((d.k2 - 0.671_518_551_772_977_5).abs() < 1e-12);
+
+    // The mirror images directions up to ~120° off the optical axis (a disc of radius
+    // ≈ 475 px in the picture); every one of them lands inside the 1230×1000 crop, and
+    // round-trips through the iterative undistortion.
+    let mut max_radius: f64 = 0.0;
+    for k in 0..=120 {
+        for a in 0..72 {
+            let t = f64::from(k).to_radians();
+            let az = f64::from(a * 5).to_radians();
+            let p = [t.sin() * az.cos(), t.sin() * az.sin(), t.cos()];
+            let pixel = camera
+                .project(p)
+                .unwrap_or_else(|e| panic!("{k}° az {a}: {e:?}"));
+            max_radius = max_radius.max((pixel[0] - i.u0).hypot(pixel[1] - i.v0));
+            let ray = camera.unproject(pixel).unwrap();
+            assert!((ray[0] - p[0]).abs() + (ray[1] - p[1]).abs() + (ray[2] - p[2]).abs() < 1e-8);
+        }
+    }
+    assert!(
+        (440.0..520.0).contains(&max_radius),
+        "rim radius {max_radius}"
+    );
+    // Beyond the mirror's rim, the ξ > 1 domain extends to acos(−1/ξ) ≈ 131.2°, where the
+    // distortion polynomial is extrapolated and the projection leaves the crop.
+    let t = 131.0f64.to_radians();
+    assert_eq!(
+        camera.project([0.0, -t.sin(), t.cos()]),
+        Err(OutOfView::OutsideImage)
+    );
+    assert_eq!(
+        camera.project([0.0, 0.0, -1.0]),
+        Err(OutOfView::OutsideXiDomain)
+    );
+}
+
+#[test]
+fn batch_projection_matches_single() {
+    let camera = fixture_320();
+    let points: Vec<[f32; 3]> = (0..1000)
+        .map(|k| {
+            let a = k as f32 * 0.37;
+            let t = 0.3 + (k % 20) as f32 * 0.1;
+            [
+                t.sin() * a.cos() * 5.0,
+                t.sin() * a.sin() * 5.0,
+                t.cos() * 5.0,
+            ]
+        })
+        .collect();
+    let mut out = vec![Err(OutOfView::OutsideImage); points.len()];
+    camera.project_batch(&points, &mut out).unwrap();
+    for (p, o) in points.iter().zip(&out) {
+        assert_eq!(*o, camera.project(*p));
+    }
+    assert!(out.iter().any(|o| o.is_ok()) && out.iter().any(|o| o.is_err()));
+    let mut short = vec![Err(OutOfView::OutsideImage); 3];
+    assert!(camera.project_batch(&points, &mut short).is_err());
+}

@@ -1,0 +1,65 @@
+//! Project automation behind `cargo xtask <command>` (see `cargo xtask help`).
+//!
+//! Kept to few dependencies: it builds the project's own crates and writes files.
+#![deny(missing_docs)]
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+
+pub mod fixtures;
+
+/// The workspace root (the parent of `xtask/`).
+pub fn project_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask/ lives in the workspace root")
+        .to_path_buf()
+}
+
+const HELP: &str = "\
+cargo xtask <command>
+
+commands:
+  fixtures [--check]   write fixtures/*.toml from their definition in xtask/src/fixtures.rs
+                       (--check: fail if the committed files differ)
+  help                 this text
+";
+
+/// Run one command with its arguments.
+pub fn run(args: Vec<String>) -> anyhow::Result<()> {
+    let (command, rest) = match args.split_first() {
+        Some((c, rest)) => (c.as_str(), rest),
+        None => ("help", &[][..]),
+    };
+    match command {
+        "fixtures" => {
+            let check = match rest {
+                [] => false,
+                [flag] if flag == "--check" => true,
+                _ => bail!("usage: cargo xtask fixtures [--check]"),
+            };
+            let dir = project_root().join("fixtures");
+            for (name, text) in fixtures::camera_files()? {
+                let path = dir.join(name);
+                if check {
+                    let on_disk = std::fs::read_to_string(&path)
+                        .with_context(|| format!("reading {}", path.display()))?;
+                    if on_disk != text {
+                        bail!("{} is stale: run `cargo xtask fixtures`", path.display());
+                    }
+                } else {
+                    std::fs::write(&path, text)
+                        .with_context(|| format!("writing {}", path.display()))?;
+                    println!("wrote {}", path.display());
+                }
+            }
+            Ok(())
+        }
+        "help" | "--help" | "-h" => {
+            print!("{HELP}");
+            Ok(())
+        }
+        other => bail!("unknown command `{other}`\n\n{HELP}"),
+    }
+}

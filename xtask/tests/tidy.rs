@@ -1,0 +1,117 @@
+//! Tidy checks of the repository, run as tests (as rust-analyzer does).
+
+use std::fs;
+use std::path::Path;
+
+use xtask::project_root;
+
+fn read(path: &Path) -> String {
+    fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn crate_dirs() -> Vec<std::path::PathBuf> {
+    let mut dirs: Vec<_> = fs::read_dir(project_root().join("crates"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("Cargo.toml").exists())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+#[test]
+fn the_workspace_has_the_agreed_shape() {
+    let root = project_root();
+    for entry in [
+        "Cargo.toml",
+        "crates",
+        "xtask",
+        "fixtures",
+        "benches",
+        "docs",
+        "README.md",
+    ] {
+        assert!(root.join(entry).exists(), "missing top-level {entry}");
+    }
+    assert!(root.join("docs/ARCHITECTURE.md").exists());
+    let names: Vec<_> = crate_dirs()
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    for expected in ["bench-conv", "brightness", "pgm", "splat", "ucm", "vvs"] {
+        assert!(
+            names.iter().any(|n| n == expected),
+            "missing crates/{expected}"
+        );
+    }
+}
+
+#[test]
+fn every_member_inherits_the_workspace_lints_and_package() {
+    let mut manifests: Vec<_> = crate_dirs().iter().map(|d| d.join("Cargo.toml")).collect();
+    manifests.push(project_root().join("xtask/Cargo.toml"));
+    manifests.push(project_root().join("benches/Cargo.toml"));
+    for manifest in manifests {
+        let text = read(&manifest);
+        assert!(
+            text.contains("[lints]\nworkspace = true"),
+            "{} does not inherit [workspace.lints]",
+            manifest.display()
+        );
+        assert!(
+            text.contains("edition.workspace = true"),
+            "{}",
+            manifest.display()
+        );
+        // Versions are pinned once, in the root manifest.
+        for line in text.lines() {
+            let line = line.trim();
+            assert!(
+                !line.contains("version = \"") || line.starts_with("version.workspace"),
+                "{}: pin `{line}` in [workspace.dependencies]",
+                manifest.display()
+            );
+        }
+    }
+}
+
+#[test]
+fn every_library_denies_missing_docs_and_every_crate_is_in_the_architecture() {
+    let architecture = read(&project_root().join("docs/ARCHITECTURE.md"));
+    for dir in crate_dirs() {
+        let lib = dir.join("src/lib.rs");
+        if lib.exists() {
+            assert!(
+                read(&lib).contains("#![deny(missing_docs)]"),
+                "{} lacks #![deny(missing_docs)]",
+                lib.display()
+            );
+        }
+        let name = dir.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(
+            architecture.contains(&format!("`{name}`")),
+            "docs/ARCHITECTURE.md does not describe `{name}`"
+        );
+    }
+}
+
+#[test]
+fn fixtures_are_up_to_date() {
+    for (name, text) in xtask::fixtures::camera_files().unwrap() {
+        let path = project_root().join("fixtures").join(name);
+        assert_eq!(
+            read(&path),
+            text,
+            "{name} is stale: run `cargo xtask fixtures`"
+        );
+    }
+}
+
+#[test]
+fn readme_names_the_test_command_ci_runs() {
+    let readme = read(&project_root().join("README.md"));
+    let ci = read(&project_root().join(".ci/run"));
+    let command = "cargo test --workspace";
+    assert!(readme.contains(command), "README.md must give `{command}`");
+    assert!(ci.contains(command), ".ci/run must run `{command}`");
+}
