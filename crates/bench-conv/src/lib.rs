@@ -1,6 +1,50 @@
-//! The convergence-domain experiment harness and command-line tools.
+//! The experiment harness and command-line tools of the project.
 //!
-//! **Not implemented yet**: this crate has no API until issue #6 lands (see
-//! `docs/ARCHITECTURE.md` for what it will hold). It exists so that the workspace has
-//! its final shape and the crate name is reserved.
+//! The `bench-conv` binary hosts the tools a user needs to look at data:
+//!
+//! * `bench-conv city --out city.las [--seed N] [--spacing-m S] [--textures DIR]`:
+//!   generate the synthetic city and write it as LAS/LAZ;
+//! * `bench-conv render --camera CAM.toml (--cloud FILE.las | --city-seed N)
+//!   (--pose tx,ty,tz,θwx,θwy,θwz | --looking-down x,y,z,heading_deg) --out IMG.png`:
+//!   render a cloud at a pose, and report what was drawn.
+//!
+//! The convergence protocol of the paper (§3) lands here with issue #6.
 #![deny(missing_docs)]
+
+use anyhow::{Context, bail};
+use glam::DVec3;
+use ucm::Isometry3;
+
+/// Parse `n` comma-separated numbers.
+pub fn parse_numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|s| {
+            s.trim()
+                .parse::<f64>()
+                .with_context(|| format!("`{s}` is not a number"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    if values.len() != N {
+        bail!("expected {N} comma-separated numbers, got {}", values.len());
+    }
+    let mut out = [0.0; N];
+    out.copy_from_slice(&values);
+    Ok(out)
+}
+
+/// `world_from_camera` from either the paper's pose vector `(t, θw)` or a camera
+/// looking down at `x, y, z` with its X axis at `heading_deg` from the world X axis.
+pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Result<Isometry3> {
+    match (pose, looking_down) {
+        (Some(p), None) => Ok(Isometry3::from_pose_vector(parse_numbers::<6>(p)?)?),
+        (None, Some(l)) => {
+            let [x, y, z, heading] = parse_numbers::<4>(l)?;
+            Ok(splat::city::camera_looking_down(
+                DVec3::new(x, y, z),
+                heading.to_radians(),
+            ))
+        }
+        _ => bail!("give exactly one of --pose and --looking-down"),
+    }
+}

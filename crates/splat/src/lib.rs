@@ -1,6 +1,16 @@
-//! CPU point-cloud renderer for the unified central camera model.
-//!
-//! **Not implemented yet**: this crate has no API until issue #3 lands (see
-//! `docs/ARCHITECTURE.md` for what it will hold). It exists so that the workspace has
-//! its final shape and the crate name is reserved.
+#![doc = include_str!("../README.md")]
 #![deny(missing_docs)]
+
+pub mod city;
+mod cloud;
+mod error;
+mod frame;
+pub mod las_io;
+mod render;
+pub mod rng;
+
+pub use cloud::{Cell, DEFAULT_CELL_SIZE_M, PointCloud, luminance};
+pub use error::SplatError;
+pub use frame::{Frame, PixelStatus};
+pub use las_io::{LasInfo, read_las, write_las};
+pub use render::{RenderOptions, RenderStats, Renderer};

@@ -1,0 +1,147 @@
+//! `bench-conv`: command-line tools of the PGM project (see the crate documentation).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use splat::city::{City, CityParams};
+use splat::{Frame, RenderOptions, Renderer};
+
+#[derive(Parser)]
+#[command(version, about = "Tools of the PGM omnidirectional VVS project")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Generate the synthetic city and write it as LAS (or LAZ by the extension).
+    City {
+        /// Output file (.las or .laz).
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed of the city.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Point spacing, metres.
+        #[arg(long, default_value_t = 0.05)]
+        spacing_m: f64,
+        /// Folder of photographic textures (brick.png, gravel.png, grass.png).
+        #[arg(long)]
+        textures: Option<PathBuf>,
+    },
+    /// Render a cloud at a pose with a camera, to a PNG.
+    Render {
+        /// Camera TOML file.
+        #[arg(long)]
+        camera: PathBuf,
+        /// A LAS/LAZ cloud (else the synthetic city of --city-seed).
+        #[arg(long)]
+        cloud: Option<PathBuf>,
+        /// Seed of the synthetic city, when no --cloud is given.
+        #[arg(long, default_value_t = 1)]
+        city_seed: u64,
+        /// Camera pose in the world, the paper's r = tx,ty,tz,θwx,θwy,θwz (m, rad).
+        #[arg(long, allow_hyphen_values = true)]
+        pose: Option<String>,
+        /// A camera looking down at x,y,z (m) with its X axis at heading (degrees).
+        #[arg(long, allow_hyphen_values = true)]
+        looking_down: Option<String>,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Draw every point (no level of detail).
+        #[arg(long)]
+        no_lod: bool,
+    },
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::City {
+            out,
+            seed,
+            spacing_m,
+            textures,
+        } => {
+            let params = CityParams {
+                seed,
+                spacing_m,
+                texture_dir: textures,
+                ..CityParams::default()
+            };
+            let city = City::generate(&params)?;
+            println!(
+                "generated {} points in {:.2} s",
+                city.cloud.len(),
+                city.generation_time_s
+            );
+            splat::write_las(&city.cloud, &out)?;
+            println!("wrote {}", out.display());
+        }
+        Command::Render {
+            camera,
+            cloud,
+            city_seed,
+            pose,
+            looking_down,
+            out,
+            no_lod,
+        } => {
+            let world_from_camera =
+                bench_conv::parse_pose(pose.as_deref(), looking_down.as_deref())?;
+            let camera = ucm::Camera::load_toml(&camera)?;
+            let cloud = match cloud {
+                Some(path) => {
+                    let (cloud, info) = splat::read_las(&path)
+                        .with_context(|| format!("reading {}", path.display()))?;
+                    println!(
+                        "{}: {} points, {:?}",
+                        path.display(),
+                        cloud.len(),
+                        info.intensity_source
+                    );
+                    cloud
+                }
+                None => {
+                    let city = City::generate(&CityParams {
+                        seed: city_seed,
+                        ..CityParams::default()
+                    })?;
+                    println!(
+                        "city {city_seed}: {} points in {:.2} s",
+                        city.cloud.len(),
+                        city.generation_time_s
+                    );
+                    city.cloud
+                }
+            };
+            let options = RenderOptions {
+                lod_spacing_px: if no_lod {
+                    None
+                } else {
+                    RenderOptions::default().lod_spacing_px
+                },
+                ..RenderOptions::default()
+            };
+            let mut renderer = Renderer::new(camera.clone(), options)?;
+            let mut frame = Frame::for_camera(&camera);
+            let started = Instant::now();
+            let stats = renderer.render(&cloud, &world_from_camera.inverse(), &mut frame)?;
+            let elapsed = started.elapsed();
+            let (hit, sky, masked) = frame.counts();
+            println!(
+                "rendered {} of {} points ({} cells) in {:.2} ms: {hit} hit, {sky} sky, {masked} masked pixels",
+                stats.points_drawn,
+                cloud.len(),
+                stats.cells_drawn,
+                elapsed.as_secs_f64() * 1e3
+            );
+            frame.save_png(&out)?;
+            println!("wrote {}", out.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,305 @@
+//! [`PointCloud`]: points laid out for rendering speed.
+//!
+//! * Positions are `f32` relative to an `f64` origin, so that georeferenced clouds
+//!   (coordinates of 10⁵–10⁶ m) keep millimetre precision.
+//! * Each point carries one intensity in `[0, 1]`, the luminance of its colour
+//!   (Rec. 709 weights on the stored, gamma-encoded values:
+//!   `0.2126 R + 0.7152 G + 0.0722 B`), interleaved with its position (`[x, y, z, i]`,
+//!   16 bytes) so that the renderer streams one array.
+//! * Points are grouped into cubic cells (visibility culling and level of detail). The
+//!   order of the points is therefore **not** the input order: it is sorted by cell and,
+//!   within a cell, shuffled deterministically so that any prefix of a cell is a uniform
+//!   subsample of it.
+
+use glam::DVec3;
+
+use crate::SplatError;
+use crate::rng::SplitMix64;
+
+/// Rec. 709 luminance of an 8-bit-per-channel colour, in `[0, 1]`.
+#[inline]
+pub fn luminance(rgb: [u8; 3]) -> f32 {
+    (0.2126 * f32::from(rgb[0]) + 0.7152 * f32::from(rgb[1]) + 0.0722 * f32::from(rgb[2])) / 255.0
+}
+
+/// A group of consecutive points of the cloud inside one cubic cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cell {
+    /// First point.
+    pub start: u32,
+    /// Number of points.
+    pub len: u32,
+    /// Centre of the bounding sphere, relative to the cloud's origin.
+    pub center: [f32; 3],
+    /// Radius of the bounding sphere, metres.
+    pub radius: f32,
+}
+
+/// A coloured point cloud ready to render.
+#[derive(Clone, Debug)]
+pub struct PointCloud {
+    origin: DVec3,
+    points: Vec<[f32; 4]>,
+    colors: Option<Vec<[u8; 3]>>,
+    cells: Vec<Cell>,
+    spacing_m: f32,
+    cell_size_m: f32,
+}
+
+/// Default edge of the culling / level-of-detail cells, metres.
+pub const DEFAULT_CELL_SIZE_M: f32 = 2.0;
+
+impl PointCloud {
+    /// Build a cloud from world positions and per-point intensities in `[0, 1]`
+    /// (clamped), with optional 8-bit colours. `origin` is subtracted from every
+    /// position (pass the cloud's minimum corner or centre for georeferenced data).
+    /// `spacing_m` is the typical distance between neighbouring points on a surface
+    /// (it sizes the splats); `None` estimates it from the data.
+    ///
+    /// Errors: no point, a non-finite coordinate or intensity, attribute lengths that
+    /// differ, more than `u32::MAX` points.
+    pub fn from_points(
+        origin: DVec3,
+        positions: &[DVec3],
+        intensities: &[f32],
+        colors: Option<Vec<[u8; 3]>>,
+        spacing_m: Option<f32>,
+    ) -> Result<Self, SplatError> {
+        Self::build(
+            origin,
+            positions,
+            intensities,
+            colors,
+            spacing_m,
+            DEFAULT_CELL_SIZE_M,
+        )
+    }
+
+    /// As [`PointCloud::from_points`], with the cell size of the spatial index.
+    pub fn build(
+        origin: DVec3,
+        positions: &[DVec3],
+        intensities: &[f32],
+        colors: Option<Vec<[u8; 3]>>,
+        spacing_m: Option<f32>,
+        cell_size_m: f32,
+    ) -> Result<Self, SplatError> {
+        let n = positions.len();
+        if n == 0 {
+            return Err(SplatError::EmptyCloud);
+        }
+        if n > u32::MAX as usize {
+            return Err(SplatError::TooManyPoints(n));
+        }
+        if intensities.len() != n {
+            return Err(SplatError::AttributeLength {
+                what: "intensities",
+                got: intensities.len(),
+                expected: n,
+            });
+        }
+        if let Some(c) = &colors
+            && c.len() != n
+        {
+            return Err(SplatError::AttributeLength {
+                what: "colors",
+                got: c.len(),
+                expected: n,
+            });
+        }
+        if !(cell_size_m.is_finite() && cell_size_m > 0.0) {
+            return Err(SplatError::Parameter {
+                name: "cell_size_m",
+                message: format!("must be finite and > 0, got {cell_size_m}"),
+            });
+        }
+        if !origin.is_finite() {
+            return Err(SplatError::NonFinitePoint {
+                index: usize::MAX,
+                value: origin.to_array(),
+            });
+        }
+        for (index, p) in positions.iter().enumerate() {
+            if !p.is_finite() {
+                return Err(SplatError::NonFinitePoint {
+                    index,
+                    value: p.to_array(),
+                });
+            }
+        }
+        if let Some(index) = intensities.iter().position(|i| !i.is_finite()) {
+            return Err(SplatError::Parameter {
+                name: "intensities",
+                message: format!("intensity of point {index} is {}", intensities[index]),
+            });
+        }
+        if let Some(s) = spacing_m
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(SplatError::Parameter {
+                name: "spacing_m",
+                message: format!("must be finite and > 0, got {s}"),
+            });
+        }
+
+        // Cell key of every point, then a stable order: by cell, shuffled within.
+        let inv = 1.0 / f64::from(cell_size_m);
+        let key = |p: &DVec3| {
+            let c = ((*p - origin) * inv).floor();
+            (c.x as i64, c.y as i64, c.z as i64)
+        };
+        let mut rng = SplitMix64::new(0x5EED_CE11);
+        let mut order: Vec<(i64, i64, i64, u64, u32)> = positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let (x, y, z) = key(p);
+                (x, y, z, rng.next_u64(), i as u32)
+            })
+            .collect();
+        order.sort_unstable();
+
+        let mut points = Vec::with_capacity(n);
+        let mut sorted_colors = colors.as_ref().map(|_| Vec::with_capacity(n));
+        let mut cells = Vec::new();
+        let mut start = 0usize;
+        while start < n {
+            let k = (order[start].0, order[start].1, order[start].2);
+            let mut end = start;
+            let mut lo = DVec3::splat(f64::INFINITY);
+            let mut hi = DVec3::splat(f64::NEG_INFINITY);
+            while end < n && (order[end].0, order[end].1, order[end].2) == k {
+                let i = order[end].4 as usize;
+                let p = positions[i] - origin;
+                lo = lo.min(p);
+                hi = hi.max(p);
+                points.push([
+                    p.x as f32,
+                    p.y as f32,
+                    p.z as f32,
+                    intensities[i].clamp(0.0, 1.0),
+                ]);
+                if let (Some(out), Some(c)) = (&mut sorted_colors, &colors) {
+                    out.push(c[i]);
+                }
+                end += 1;
+            }
+            let center = (lo + hi) * 0.5;
+            cells.push(Cell {
+                start: start as u32,
+                len: (end - start) as u32,
+                center: center.as_vec3().to_array(),
+                radius: ((hi - lo).length() * 0.5) as f32 + 1e-3,
+            });
+            start = end;
+        }
+        let mut cloud = Self {
+            origin,
+            points,
+            colors: sorted_colors,
+            cells,
+            spacing_m: 0.0,
+            cell_size_m,
+        };
+        cloud.spacing_m = match spacing_m {
+            Some(s) => s,
+            None => cloud.estimate_spacing(),
+        };
+        Ok(cloud)
+    }
+
+    /// Median nearest-neighbour distance of a deterministic sample of points (searched
+    /// within their cell).
+    fn estimate_spacing(&self) -> f32 {
+        let mut rng = SplitMix64::new(17);
+        let mut distances = Vec::new();
+        let cells: Vec<&Cell> = self.cells.iter().filter(|c| c.len > 1).collect();
+        if cells.is_empty() {
+            return self.cell_size_m * 0.5;
+        }
+        for _ in 0..2000 {
+            let cell = cells[rng.below(cells.len() as u64) as usize];
+            let range = cell.start as usize..(cell.start + cell.len.min(4096)) as usize;
+            let pts = &self.points[range];
+            let a = pts[rng.below(pts.len() as u64) as usize];
+            let best = pts
+                .iter()
+                .map(|b| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2))
+                .filter(|&d| d > 0.0)
+                .fold(f32::INFINITY, f32::min);
+            if best.is_finite() {
+                distances.push(best.sqrt());
+            }
+        }
+        if distances.is_empty() {
+            return self.cell_size_m * 0.5;
+        }
+        distances.sort_unstable_by(f32::total_cmp);
+        distances[distances.len() / 2]
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Always false: an empty cloud cannot be built.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The origin subtracted from every position.
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// Points as `[x, y, z, intensity]`, positions relative to [`PointCloud::origin`].
+    pub fn points(&self) -> &[[f32; 4]] {
+        &self.points
+    }
+
+    /// Per-point 8-bit colours, if the source had colour.
+    pub fn colors(&self) -> Option<&[[u8; 3]]> {
+        self.colors.as_deref()
+    }
+
+    /// The spatial cells, in point order.
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+
+    /// Typical point spacing on a surface, metres (sizes the splats).
+    pub fn spacing_m(&self) -> f32 {
+        self.spacing_m
+    }
+
+    /// Override the point spacing (must be finite and > 0).
+    pub fn set_spacing_m(&mut self, spacing_m: f32) -> Result<(), SplatError> {
+        if !(spacing_m.is_finite() && spacing_m > 0.0) {
+            return Err(SplatError::Parameter {
+                name: "spacing_m",
+                message: format!("must be finite and > 0, got {spacing_m}"),
+            });
+        }
+        self.spacing_m = spacing_m;
+        Ok(())
+    }
+
+    /// World position of point `i`.
+    pub fn world_position(&self, i: usize) -> DVec3 {
+        let p = self.points[i];
+        self.origin + DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+    }
+
+    /// Axis-aligned bounds `(min, max)` in world coordinates.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        let mut lo = glam::Vec3::splat(f32::INFINITY);
+        let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
+        for p in &self.points {
+            let v = glam::Vec3::new(p[0], p[1], p[2]);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        (self.origin + lo.as_dvec3(), self.origin + hi.as_dvec3())
+    }
+}

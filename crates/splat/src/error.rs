@@ -1,0 +1,80 @@
+//! The one error type of the crate.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong when reading, building, writing or rendering a cloud.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SplatError {
+    /// A LAS/LAZ file could not be read or written (truncated, corrupt, unsupported).
+    #[error("LAS/LAZ file {path}: {source}")]
+    Las {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: Box<las::Error>,
+    },
+    /// A cloud with no point.
+    #[error("the point cloud is empty")]
+    EmptyCloud,
+    /// A point with a NaN or infinite coordinate.
+    #[error("point {index} has a non-finite coordinate {value:?}")]
+    NonFinitePoint {
+        /// Index of the point in the input.
+        index: usize,
+        /// Its coordinates.
+        value: [f64; 3],
+    },
+    /// More points than the renderer can index (`u32`).
+    #[error("{0} points exceed the renderer's limit of 4294967295")]
+    TooManyPoints(usize),
+    /// Per-point attributes of the wrong length.
+    #[error("{what}: {got} values for {expected} points")]
+    AttributeLength {
+        /// Which attribute.
+        what: &'static str,
+        /// Its length.
+        got: usize,
+        /// The number of points.
+        expected: usize,
+    },
+    /// A frame of the wrong size for the camera.
+    #[error("frame is {frame_width}x{frame_height} but the camera is {width}x{height}")]
+    FrameSize {
+        /// Frame width.
+        frame_width: u32,
+        /// Frame height.
+        frame_height: u32,
+        /// Camera width.
+        width: u32,
+        /// Camera height.
+        height: u32,
+    },
+    /// A pose with NaN or infinite components.
+    #[error("pose is not finite")]
+    NonFinitePose,
+    /// A parameter out of its documented range.
+    #[error("invalid parameter `{name}`: {message}")]
+    Parameter {
+        /// The parameter.
+        name: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// An image (texture, PNG output) could not be read or written.
+    #[error("image {path}: {source}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: image::ImageError,
+    },
+    /// A file system error.
+    #[error("cannot access {path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+}

@@ -1,0 +1,225 @@
+//! Reading and writing LAS/LAZ files (every point format, with or without colour).
+//!
+//! * **Colour scaling is detected**: LAS stores 16-bit colour channels, but many files
+//!   put 8-bit values in them. If no channel of any point exceeds 255 the values are
+//!   taken as 8-bit; otherwise as 16-bit and scaled down (`v / 257`).
+//! * **Without colour**, a point's intensity is its LAS `intensity` attribute divided
+//!   by the largest intensity of the file; if every intensity is zero, every point gets
+//!   the constant [`CONSTANT_INTENSITY`].
+//! * The cloud's origin is the header's minimum corner, rounded down to the metre, so
+//!   that `f32` positions keep millimetre precision on georeferenced data.
+//! * Writing uses LAS 1.2 point format 2 (position and colour, 16-bit full range,
+//!   millimetre resolution); a `.laz` extension compresses. A cloud without colour
+//!   is written in grey levels of its intensity, so that it renders the same when
+//!   read back.
+
+use std::path::Path;
+
+use glam::DVec3;
+
+use crate::{PointCloud, SplatError};
+
+/// Intensity of every point of a cloud that has neither colour nor intensity.
+pub const CONSTANT_INTENSITY: f32 = 0.5;
+
+/// How a file's colours were interpreted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColorScale {
+    /// 8-bit values stored in the 16-bit fields.
+    EightBit,
+    /// Full 16-bit range.
+    SixteenBit,
+}
+
+/// Where the intensities of a loaded cloud come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IntensitySource {
+    /// Luminance of the colours, interpreted with this scale.
+    Color(ColorScale),
+    /// The LAS intensity attribute, normalised by its maximum.
+    IntensityAttribute,
+    /// [`CONSTANT_INTENSITY`].
+    Constant,
+}
+
+/// What was found in a LAS/LAZ file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LasInfo {
+    /// Number of points in the header.
+    pub header_point_count: u64,
+    /// LAS point format number.
+    pub point_format: u8,
+    /// LAS version `(major, minor)`.
+    pub version: (u8, u8),
+    /// Header bounds `(min, max)`.
+    pub bounds: (DVec3, DVec3),
+    /// Largest colour channel value over all points, if the format has colour.
+    pub max_color_value: Option<u16>,
+    /// How intensities were made.
+    pub intensity_source: IntensitySource,
+}
+
+fn las_error(path: &Path) -> impl Fn(las::Error) -> SplatError + '_ {
+    move |source| SplatError::Las {
+        path: path.to_owned(),
+        source: Box::new(source),
+    }
+}
+
+/// Read a LAS or LAZ file into a cloud (point spacing estimated from the data).
+pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatError> {
+    let path = path.as_ref();
+    if !path.exists() {
+        return Err(SplatError::Io {
+            path: path.to_owned(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        });
+    }
+    let mut reader = las::Reader::from_path(path).map_err(las_error(path))?;
+    let header = reader.header().clone();
+    let format = header.point_format();
+    let point_format = format.to_u8().map_err(las_error(path))?;
+    let version = (header.version().major, header.version().minor);
+    let b = header.bounds();
+    let bounds = (
+        DVec3::new(b.min.x, b.min.y, b.min.z),
+        DVec3::new(b.max.x, b.max.y, b.max.z),
+    );
+    let data = reader.read_all().map_err(las_error(path))?;
+    if (data.len() as u64) < header.number_of_points() {
+        return Err(SplatError::Las {
+            path: path.to_owned(),
+            source: Box::new(las::Error::Io(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!(
+                    "truncated: {} of {} points",
+                    data.len(),
+                    header.number_of_points()
+                ),
+            ))),
+        });
+    }
+    let positions: Vec<DVec3> = data
+        .x()
+        .zip(data.y())
+        .zip(data.z())
+        .map(|((x, y), z)| DVec3::new(x, y, z))
+        .collect();
+    if positions.is_empty() {
+        return Err(SplatError::EmptyCloud);
+    }
+    let origin = if bounds.0.is_finite() {
+        bounds.0.floor()
+    } else {
+        positions[0].floor()
+    };
+
+    let (intensities, colors, max_color_value, intensity_source) = match data.rgb() {
+        Some(rgb) => {
+            let raw: Vec<[u16; 3]> = rgb.map(|(r, g, b)| [r, g, b]).collect();
+            let max = raw.iter().flatten().copied().max().unwrap_or(0);
+            let scale = if max <= 255 {
+                ColorScale::EightBit
+            } else {
+                ColorScale::SixteenBit
+            };
+            let colors: Vec<[u8; 3]> = raw
+                .iter()
+                .map(|c| {
+                    c.map(|v| match scale {
+                        ColorScale::EightBit => v as u8,
+                        ColorScale::SixteenBit => ((u32::from(v) + 128) / 257) as u8,
+                    })
+                })
+                .collect();
+            let intensities = colors.iter().map(|&c| crate::luminance(c)).collect();
+            (
+                intensities,
+                Some(colors),
+                Some(max),
+                IntensitySource::Color(scale),
+            )
+        }
+        None => {
+            let raw: Vec<u16> = data.intensity().collect();
+            let max = raw.iter().copied().max().unwrap_or(0);
+            if max == 0 {
+                (
+                    vec![CONSTANT_INTENSITY; raw.len()],
+                    None,
+                    None,
+                    IntensitySource::Constant,
+                )
+            } else {
+                let inv = 1.0 / f32::from(max);
+                (
+                    raw.iter().map(|&i| f32::from(i) * inv).collect(),
+                    None,
+                    None,
+                    IntensitySource::IntensityAttribute,
+                )
+            }
+        }
+    };
+    let cloud = PointCloud::from_points(origin, &positions, &intensities, colors, None)?;
+    Ok((
+        cloud,
+        LasInfo {
+            header_point_count: header.number_of_points(),
+            point_format,
+            version,
+            bounds,
+            max_color_value,
+            intensity_source,
+        },
+    ))
+}
+
+/// Write a cloud as LAS (or LAZ, by the `.laz` extension): LAS 1.2, point format 2,
+/// millimetre resolution, 16-bit colour (grey levels of the intensity if the cloud has
+/// no colour).
+pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), SplatError> {
+    let path = path.as_ref();
+    let err = las_error(path);
+    let mut builder = las::Builder::from((1, 2));
+    builder.point_format = las::point::Format::new(2).map_err(&err)?;
+    builder.generating_software = "pgm-omni-vvs splat".into();
+    let origin = cloud.origin();
+    builder.transforms = las::Vector {
+        x: las::Transform {
+            scale: 0.001,
+            offset: origin.x,
+        },
+        y: las::Transform {
+            scale: 0.001,
+            offset: origin.y,
+        },
+        z: las::Transform {
+            scale: 0.001,
+            offset: origin.z,
+        },
+    };
+    let header = builder.into_header().map_err(&err)?;
+    let mut writer = las::Writer::from_path(path, header).map_err(&err)?;
+    for (i, p) in cloud.points().iter().enumerate() {
+        let rgb = match cloud.colors() {
+            Some(c) => c[i],
+            None => [(p[3] * 255.0).round() as u8; 3],
+        };
+        let w = cloud.world_position(i);
+        let point = las::Point {
+            x: w.x,
+            y: w.y,
+            z: w.z,
+            color: Some(las::Color::new(
+                u16::from(rgb[0]) * 257,
+                u16::from(rgb[1]) * 257,
+                u16::from(rgb[2]) * 257,
+            )),
+            ..Default::default()
+        };
+        writer.write_point(point).map_err(&err)?;
+    }
+    writer.close().map_err(&err)?;
+    Ok(())
+}

@@ -1,0 +1,173 @@
+//! LAS/LAZ: every shared file against its header, colour scaling, round trips, errors.
+
+use glam::DVec3;
+use splat::las_io::{ColorScale, IntensitySource};
+use splat::{PointCloud, SplatError, read_las, write_las};
+
+use crate::common::*;
+
+#[test]
+fn every_shared_cloud_reads_with_its_header_counts_and_colour_range() {
+    let Some(data) = data_dir() else { return };
+    let dir = data.join("clouds");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_lowercase();
+        if ext != "las" && ext != "laz" {
+            continue;
+        }
+        let (cloud, info) = read_las(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert_eq!(
+            cloud.len() as u64,
+            info.header_point_count,
+            "{}",
+            path.display()
+        );
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        // Positions within the header's bounds (millimetre tolerance of f32 offsets).
+        let (lo, hi) = cloud.bounds();
+        assert!(
+            (lo - info.bounds.0).abs().max_element() < 0.01,
+            "{name}: {lo} vs {}",
+            info.bounds.0
+        );
+        assert!(
+            (hi - info.bounds.1).abs().max_element() < 0.01,
+            "{name}: {hi} vs {}",
+            info.bounds.1
+        );
+        match name.as_str() {
+            "autzen_trim.las" | "autzen_trim_7.las" => {
+                assert_eq!(cloud.len(), 110_000);
+                assert_eq!(
+                    info.intensity_source,
+                    IntensitySource::Color(ColorScale::EightBit)
+                );
+                assert!(info.max_color_value.unwrap() <= 255);
+            }
+            "sample_c.las" => {
+                assert_eq!(cloud.len(), 14_408);
+                assert_eq!(
+                    info.intensity_source,
+                    IntensitySource::Color(ColorScale::SixteenBit)
+                );
+                assert!(info.max_color_value.unwrap() > 255);
+            }
+            "lone-star.laz" => {
+                assert_eq!(cloud.len(), 518_862);
+                assert_eq!(info.point_format, 1);
+                assert!(cloud.colors().is_none());
+            }
+            _ => {}
+        }
+        // Colour clouds use the whole 8-bit range after scaling, not a sliver of it.
+        if let Some(colors) = cloud.colors() {
+            let max = colors.iter().flatten().copied().max().unwrap();
+            assert!(max > 128, "{name}: max colour {max}");
+        }
+        let max_i = cloud.points().iter().map(|p| p[3]).fold(0.0f32, f32::max);
+        assert!(max_i > 0.3 && max_i <= 1.0, "{name}: {max_i}");
+        seen += 1;
+    }
+    assert!(seen >= 5, "{seen} clouds in {}", dir.display());
+}
+
+#[test]
+fn las_and_laz_round_trip() {
+    let dir = temp_dir("roundtrip");
+    let positions: Vec<DVec3> = (0..2000)
+        .map(|i| {
+            DVec3::new(
+                651_000.0 + f64::from(i) * 0.013,
+                4_860_000.0 + f64::from(i % 37) * 0.29,
+                120.0 + f64::from(i % 11),
+            )
+        })
+        .collect();
+    let colors: Vec<[u8; 3]> = (0..2000)
+        .map(|i| [(i % 256) as u8, (i * 7 % 256) as u8, (255 - i % 256) as u8])
+        .collect();
+    let intensities: Vec<f32> = colors.iter().map(|&c| splat::luminance(c)).collect();
+    let cloud = PointCloud::from_points(
+        DVec3::new(651_000.0, 4_860_000.0, 100.0),
+        &positions,
+        &intensities,
+        Some(colors),
+        None,
+    )
+    .unwrap();
+    for name in ["c.las", "c.laz"] {
+        let path = dir.join(name);
+        write_las(&cloud, &path).unwrap();
+        let (back, info) = read_las(&path).unwrap();
+        assert_eq!(back.len(), cloud.len());
+        // Written as 16-bit full range, read back as such.
+        assert_eq!(
+            info.intensity_source,
+            IntensitySource::Color(ColorScale::SixteenBit)
+        );
+        // Same set of points (the order follows the cells): compare sorted.
+        let key = |c: &PointCloud| {
+            let mut v: Vec<(i64, i64, i64, [u8; 3])> = (0..c.len())
+                .map(|i| {
+                    let p = c.world_position(i);
+                    (
+                        (p.x * 1000.0).round() as i64,
+                        (p.y * 1000.0).round() as i64,
+                        (p.z * 1000.0).round() as i64,
+                        c.colors().unwrap()[i],
+                    )
+                })
+                .collect();
+            v.sort();
+            v
+        };
+        let (a, b) = (key(&cloud), key(&back));
+        for (x, y) in a.iter().zip(&b) {
+            assert!(
+                (x.0 - y.0).abs() <= 1 && (x.1 - y.1).abs() <= 1 && (x.2 - y.2).abs() <= 1,
+                "{x:?} vs {y:?}"
+            );
+            assert_eq!(x.3, y.3);
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn corrupt_truncated_and_missing_files_are_errors() {
+    let dir = temp_dir("corrupt");
+    assert!(matches!(
+        read_las(dir.join("missing.las")),
+        Err(SplatError::Io { .. })
+    ));
+    let junk = dir.join("junk.las");
+    std::fs::write(&junk, b"this is not a LAS file at all, just some bytes").unwrap();
+    assert!(matches!(read_las(&junk), Err(SplatError::Las { .. })));
+
+    // A real file cut in the middle of its points.
+    let positions: Vec<DVec3> = (0..5000)
+        .map(|i| DVec3::new(f64::from(i) * 0.01, 0.0, 0.0))
+        .collect();
+    let cloud =
+        PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 5000], None, Some(0.01))
+            .unwrap();
+    for name in ["t.las", "t.laz"] {
+        let path = dir.join(name);
+        write_las(&cloud, &path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() * 2 / 3]).unwrap();
+        let result = std::panic::catch_unwind(|| read_las(&path));
+        let result = result.unwrap_or_else(|_| panic!("{name}: reading a truncated file panicked"));
+        assert!(result.is_err(), "{name}: a truncated file was accepted");
+        // Only the header: no point.
+        std::fs::write(&path, &bytes[..300.min(bytes.len())]).unwrap();
+        assert!(read_las(&path).is_err());
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

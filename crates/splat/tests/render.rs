@@ -1,0 +1,366 @@
+//! The renderer on scenes of known geometry, determinism, and the city.
+
+use glam::DVec3;
+use splat::city::{City, CityParams, camera_looking_down};
+use splat::{Frame, PixelStatus, PointCloud, RenderOptions, Renderer, SplatError};
+use ucm::Isometry3;
+
+use crate::common::*;
+
+/// A square of side `size` m in the horizontal plane `z`, centred on `(cx, cy)`,
+/// sampled every `step` m, of one intensity.
+fn square(
+    cx: f64,
+    cy: f64,
+    z: f64,
+    size: f64,
+    step: f64,
+    intensity: f32,
+) -> (Vec<DVec3>, Vec<f32>) {
+    let n = (size / step) as i64;
+    let mut p = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            p.push(DVec3::new(
+                cx - size / 2.0 + (i as f64 + 0.5) * step,
+                cy - size / 2.0 + (j as f64 + 0.5) * step,
+                z,
+            ));
+        }
+    }
+    let k = p.len();
+    (p, vec![intensity; k])
+}
+
+fn cloud_of(parts: &[(Vec<DVec3>, Vec<f32>)], spacing: f32) -> PointCloud {
+    let positions: Vec<DVec3> = parts.iter().flat_map(|p| p.0.clone()).collect();
+    let intensities: Vec<f32> = parts.iter().flat_map(|p| p.1.clone()).collect();
+    PointCloud::from_points(
+        DVec3::new(1000.0, 2000.0, 0.0),
+        &positions,
+        &intensities,
+        None,
+        Some(spacing),
+    )
+    .unwrap()
+}
+
+/// A ground plane with a bright marker, seen from above: the marker lands on the pixel
+/// `ucm` projects it to, with its range; the plane is everywhere below the camera.
+#[test]
+fn plane_and_marker_land_where_the_model_projects_them() {
+    let camera = fixture("omni-320x240.toml");
+    let origin = DVec3::new(1000.0, 2000.0, 0.0);
+    let ground = square(origin.x, origin.y, 0.0, 30.0, 0.03, 0.2);
+    let marker_at = origin + DVec3::new(2.5, 1.0, 0.15);
+    let marker = square(marker_at.x, marker_at.y, marker_at.z, 0.3, 0.01, 0.9);
+    let cloud = cloud_of(&[ground, marker], 0.03);
+    let world_from_camera = camera_looking_down(origin + DVec3::new(0.0, 0.0, 1.6), 0.3);
+    let camera_from_world = world_from_camera.inverse();
+    let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+    let mut frame = Frame::for_camera(&camera);
+    renderer
+        .render(&cloud, &camera_from_world, &mut frame)
+        .unwrap();
+
+    let p = camera_from_world.transform_point(marker_at).to_array();
+    let pixel = camera.project(p).expect("marker visible");
+    let k = camera.pixel_index(pixel).unwrap();
+    assert_eq!(frame.status[k], PixelStatus::Hit);
+    assert!(
+        (frame.intensity[k] - 0.9).abs() < 0.02,
+        "{}",
+        frame.intensity[k]
+    );
+    let range = DVec3::from_array(p).length() as f32;
+    assert!(
+        (frame.range_m[k] - range).abs() < 0.03 * range,
+        "{} vs {range}",
+        frame.range_m[k]
+    );
+
+    // Every valid pixel looking below the horizon sees the plane (or the marker), at the
+    // range of the ray's intersection with it.
+    let w = camera.width() as usize;
+    let mut checked = 0;
+    for (k, _) in camera
+        .valid_pixels()
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| **v)
+    {
+        let ray = camera.unproject([(k % w) as f64, (k / w) as f64]).unwrap();
+        if ray[2] < 0.35 || frame.intensity[k] > 0.5 {
+            continue; // near or above the horizon, beyond the plane's edge, or the marker
+        }
+        assert_eq!(frame.status[k], PixelStatus::Hit, "pixel {k}");
+        // The splats covering a pixel come from up to a pixel and a half around it: at
+        // grazing angles the plane's range varies that much across them.
+        let (i, j) = ((k % w) as f64, (k / w) as f64);
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for (di, dj) in [(-1.5, 0.0), (1.5, 0.0), (0.0, -1.5), (0.0, 1.5), (0.0, 0.0)] {
+            let r = camera.unproject([i + di, j + dj]).unwrap();
+            let range = 1.6 / r[2];
+            lo = lo.min(range);
+            hi = hi.max(range);
+        }
+        let got = f64::from(frame.range_m[k]);
+        assert!(
+            got > lo * 0.99 && got < hi * 1.01,
+            "pixel {k}: {got} not in [{lo}, {hi}]"
+        );
+        checked += 1;
+    }
+    assert!(checked > 2000, "{checked}");
+    // Outside the annulus: masked, never zero-filled silently.
+    assert_eq!(frame.status[0], PixelStatus::Masked);
+    assert!(frame.range_m[0].is_nan());
+}
+
+/// Two overlapping squares at different heights: the nearer one hides the farther one
+/// whatever the order of the points, and the z-buffer keeps its range.
+#[test]
+fn nearer_surface_occludes_farther_one() {
+    let camera = fixture("omni-320x240.toml");
+    let origin = DVec3::new(1000.0, 2000.0, 0.0);
+    let far = square(origin.x + 3.0, origin.y, 0.0, 2.0, 0.02, 0.1);
+    let near = square(origin.x + 3.0, origin.y, 0.8, 1.0, 0.02, 0.9);
+    let camera_from_world = camera_looking_down(origin + DVec3::new(0.0, 0.0, 2.0), 0.0).inverse();
+    for parts in [[far.clone(), near.clone()], [near.clone(), far.clone()]] {
+        let cloud = cloud_of(&parts, 0.02);
+        let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        renderer
+            .render(&cloud, &camera_from_world, &mut frame)
+            .unwrap();
+        let centre = camera_from_world
+            .transform_point(origin + DVec3::new(3.0, 0.0, 0.8))
+            .to_array();
+        let k = camera.pixel_index(camera.project(centre).unwrap()).unwrap();
+        assert!(
+            (frame.intensity[k] - 0.9).abs() < 1e-3,
+            "{}",
+            frame.intensity[k]
+        );
+        let expected = DVec3::from_array(centre).length() as f32;
+        // The z-buffer keeps the nearest point of the splats covering the pixel: within
+        // a pixel's footprint of the exact range.
+        assert!(
+            (frame.range_m[k] - expected).abs() < 0.03 * expected,
+            "{} vs {expected}",
+            frame.range_m[k]
+        );
+        // Beside the near square, the far one shows.
+        let beside = camera_from_world
+            .transform_point(origin + DVec3::new(3.0, 0.85, 0.0))
+            .to_array();
+        let k = camera.pixel_index(camera.project(beside).unwrap()).unwrap();
+        assert!(
+            (frame.intensity[k] - 0.1).abs() < 1e-3,
+            "{}",
+            frame.intensity[k]
+        );
+    }
+}
+
+fn render_city(
+    camera: &ucm::Camera,
+    world_from_camera: &Isometry3,
+    options: RenderOptions,
+) -> Frame {
+    let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+    let mut frame = Frame::for_camera(camera);
+    renderer
+        .render(
+            &default_city().cloud,
+            &world_from_camera.inverse(),
+            &mut frame,
+        )
+        .unwrap();
+    frame
+}
+
+/// Same frame, bit for bit, with 1 and 2 threads.
+#[test]
+fn rendering_is_deterministic_across_thread_counts() {
+    let camera = fixture("omni-320x240.toml");
+    let pose = camera_looking_down(DVec3::new(-18.0, 1.0, 3.0), 0.2);
+    let frames: Vec<Frame> = [1, 2]
+        .into_iter()
+        .map(|threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| render_city(&camera, &pose, RenderOptions::default()))
+        })
+        .collect();
+    assert!(frames[0].counts().0 > 10_000);
+    assert!(frames[0].bitwise_eq(&frames[1]));
+    let again = render_city(
+        &camera,
+        &pose,
+        RenderOptions {
+            parallel: false,
+            ..RenderOptions::default()
+        },
+    );
+    assert!(frames[0].bitwise_eq(&again));
+}
+
+/// From street level, no pixel looking below the horizon is a hole, at 640×480, with and
+/// without level of detail.
+#[test]
+fn city_has_no_holes_below_the_horizon() {
+    let camera = fixture("omni-640x480.toml");
+    let w = camera.width() as usize;
+    for (x, y, z, heading) in [
+        (-20.0, 0.5, 3.0, 0.0),
+        (15.0, -1.5, 1.6, 0.4),
+        (0.5, 30.0, 2.2, 1.6),
+    ] {
+        let pose = camera_looking_down(DVec3::new(x, y, z), heading);
+        for lod in [Some(0.5), None] {
+            let frame = render_city(
+                &camera,
+                &pose,
+                RenderOptions {
+                    lod_spacing_px: lod,
+                    ..RenderOptions::default()
+                },
+            );
+            let mut holes = 0;
+            let mut below = 0;
+            for (k, _) in camera
+                .valid_pixels()
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| **v)
+            {
+                let ray = camera.unproject([(k % w) as f64, (k / w) as f64]).unwrap();
+                // Camera Z is down: below the horizon means a positive Z (with margin).
+                if ray[2] > 0.1 {
+                    below += 1;
+                    if frame.status[k] != PixelStatus::Hit {
+                        holes += 1;
+                    }
+                }
+            }
+            assert!(below > 20_000, "{below}");
+            assert_eq!(
+                holes, 0,
+                "pose ({x}, {y}, {z}), lod {lod:?}: {holes} holes of {below}"
+            );
+        }
+    }
+}
+
+#[test]
+fn city_is_deterministic_and_validated() {
+    let params = CityParams {
+        arm_length_m: 15.0,
+        spacing_m: 0.2,
+        ..CityParams::default()
+    };
+    let a = City::generate(&params).unwrap();
+    let b = City::generate(&params).unwrap();
+    assert_eq!(a.cloud.points(), b.cloud.points());
+    assert_eq!(a.cloud.colors(), b.cloud.colors());
+    let c = City::generate(&CityParams {
+        seed: 2,
+        ..params.clone()
+    })
+    .unwrap();
+    assert_ne!(a.cloud.points(), c.cloud.points());
+    for bad in [
+        CityParams {
+            spacing_m: 0.0,
+            ..params.clone()
+        },
+        CityParams {
+            spacing_m: f64::NAN,
+            ..params.clone()
+        },
+        CityParams {
+            street_width_m: 2.0,
+            ..params.clone()
+        },
+        CityParams {
+            texture_dir: Some("/nonexistent/textures".into()),
+            ..params.clone()
+        },
+    ] {
+        assert!(City::generate(&bad).is_err(), "{bad:?}");
+    }
+}
+
+/// Photographic textures from a folder change the city's appearance, not its geometry.
+#[test]
+fn image_textures_modulate_the_city() {
+    let Some(data) = data_dir() else { return };
+    let params = CityParams {
+        arm_length_m: 15.0,
+        spacing_m: 0.2,
+        ..CityParams::default()
+    };
+    let plain = City::generate(&params).unwrap();
+    let textured = City::generate(&CityParams {
+        texture_dir: Some(data.join("textures")),
+        ..params
+    })
+    .unwrap();
+    assert_eq!(plain.cloud.len(), textured.cloud.len());
+    let differ = plain
+        .cloud
+        .points()
+        .iter()
+        .zip(textured.cloud.points())
+        .filter(|(a, b)| a[3] != b[3])
+        .count();
+    assert!(differ > plain.cloud.len() / 4, "{differ}");
+}
+
+#[test]
+fn renderer_rejects_bad_input() {
+    let camera = fixture("omni-320x240.toml");
+    let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+    let cloud = cloud_of(&[square(0.0, 0.0, 0.0, 1.0, 0.1, 0.5)], 0.1);
+    let mut wrong = Frame::new(10, 10);
+    assert!(matches!(
+        renderer.render(&cloud, &Isometry3::IDENTITY, &mut wrong),
+        Err(SplatError::FrameSize { .. })
+    ));
+    let mut frame = Frame::for_camera(&camera);
+    let nan = Isometry3 {
+        translation: DVec3::new(f64::NAN, 0.0, 0.0),
+        ..Isometry3::IDENTITY
+    };
+    assert!(matches!(
+        renderer.render(&cloud, &nan, &mut frame),
+        Err(SplatError::NonFinitePose)
+    ));
+    assert!(
+        Renderer::new(
+            camera,
+            RenderOptions {
+                depth_band: -1.0,
+                ..RenderOptions::default()
+            }
+        )
+        .is_err()
+    );
+    // Empty and non-finite clouds cannot be built.
+    assert!(matches!(
+        PointCloud::from_points(DVec3::ZERO, &[], &[], None, None),
+        Err(SplatError::EmptyCloud)
+    ));
+    let nan_point = [DVec3::new(0.0, f64::NAN, 0.0)];
+    assert!(matches!(
+        PointCloud::from_points(DVec3::ZERO, &nan_point, &[0.5], None, None),
+        Err(SplatError::NonFinitePoint { index: 0, .. })
+    ));
+    assert!(matches!(
+        PointCloud::from_points(DVec3::ZERO, &[DVec3::ZERO], &[0.5, 0.5], None, None),
+        Err(SplatError::AttributeLength { .. })
+    ));
+}
