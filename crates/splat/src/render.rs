@@ -6,10 +6,11 @@
 //!    splat whose size follows the model's local magnification
 //!    (`spacing · α/D · max((ρ + ξZ)/D, 1)` pixels, the larger of the radial and
 //!    tangential magnifications of the UCM at the point), so that surfaces close to the
-//!    camera stay hole-free. Every covered pixel keeps the minimum of the 64-bit key
-//!    `(range bits << 32) | point index`: exact, and independent of the order in
+//!    camera stay hole-free. Every covered pixel keeps the minimum of the range's bits
+//!    (positive `f32`s order as their bits): exact, and independent of the order in
 //!    which points are drawn, so the result does not depend on the thread count
-//!    (Schütz, Kerbl, Wimmer 2021).
+//!    (Schütz, Kerbl, Wimmer 2021). Only the nearest range is needed afterwards (pass 2
+//!    averages every sample near it), so the buffer keeps the 32-bit range alone.
 //! 2. **Accumulation (anti-aliasing).** Each point adds its intensity to the pixels it
 //!    covers where its range is within `depth_band` (relative) of the nearest one.
 //!    Sums are fixed-point integers (16-bit intensities), so they too are independent of
@@ -28,7 +29,7 @@
 //! Precision: `f32` throughout the per-point loop (positions relative to the cloud's
 //! origin, ranges of at most a few hundred metres).
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
@@ -129,6 +130,12 @@ struct DrawCell {
 /// The per-point constants of a rendering.
 #[derive(Clone, Copy)]
 struct View {
+    undistorted: bool,
+    alpha_u: f32,
+    alpha_v: f32,
+    skew: f32,
+    u0: f32,
+    v0: f32,
     rotation: Mat3,
     translation: Vec3,
     alpha: f32,
@@ -145,16 +152,18 @@ struct View {
 pub struct Renderer {
     camera: Camera,
     options: RenderOptions,
-    depth: Vec<AtomicU64>,
-    accum: Vec<AtomicU64>,
-    range_sum: Vec<AtomicU64>,
+    depth: Vec<AtomicU32>,
+    /// Per pixel: `(Σ intensity << 24) | count` and `Σ range`, fixed point,
+    /// interleaved so that pass 2 touches one cache line per pixel.
+    accum: Vec<[AtomicU64; 2]>,
     draw: Vec<DrawCell>,
+    splats: Vec<Splat>,
     status: Vec<PixelStatus>,
     theta_min: f32,
     theta_max: f32,
 }
 
-const EMPTY: u64 = u64::MAX;
+const EMPTY: u32 = u32::MAX;
 const COUNT_BITS: u32 = 24;
 const COUNT_MASK: u64 = (1 << COUNT_BITS) - 1;
 const INTENSITY_SCALE: f32 = 65535.0;
@@ -196,10 +205,12 @@ impl Renderer {
         Ok(Self {
             camera,
             options,
-            depth: (0..n).map(|_| AtomicU64::new(EMPTY)).collect(),
-            accum: (0..n).map(|_| AtomicU64::new(0)).collect(),
-            range_sum: (0..n).map(|_| AtomicU64::new(0)).collect(),
+            depth: (0..n).map(|_| AtomicU32::new(EMPTY)).collect(),
+            accum: (0..n)
+                .map(|_| [AtomicU64::new(0), AtomicU64::new(0)])
+                .collect(),
             draw: Vec::new(),
+            splats: Vec::new(),
             status: vec![PixelStatus::Sky; n],
             theta_min,
             theta_max,
@@ -250,6 +261,12 @@ impl Renderer {
         let (rotation, _) = camera_from_world.to_f32();
         let i = self.camera.intrinsics();
         let view = View {
+            undistorted: self.camera.distortion().is_none(),
+            alpha_u: i.alpha_u as f32,
+            alpha_v: i.alpha_v as f32,
+            skew: i.skew as f32,
+            u0: i.u0 as f32,
+            v0: i.v0 as f32,
             rotation,
             translation: translation.as_vec3(),
             alpha: i.alpha_u.max(i.alpha_v) as f32,
@@ -267,54 +284,45 @@ impl Renderer {
         for d in &self.depth {
             d.store(EMPTY, Ordering::Relaxed);
         }
-        for a in self.accum.iter().chain(&self.range_sum) {
+        for [a, b] in &self.accum {
             a.store(0, Ordering::Relaxed);
+            b.store(0, Ordering::Relaxed);
         }
         let parallel = self.options.parallel && rayon::current_num_threads() > 1;
         let points = cloud.points();
         let camera = &self.camera;
         let depth = &self.depth[..];
-        let accum = Accum {
-            sums: &self.accum[..],
-            ranges: &self.range_sum[..],
-        };
+        let accum = &self.accum[..];
+        self.splats.resize(points_drawn, Splat::default());
         if parallel {
-            // Chunks of cells of similar work; atomics make the result order-free.
+            // Chunks of cells of similar work, each with its own run of splat slots;
+            // atomics make the result independent of the order.
             let chunks = chunk_cells(&self.draw, 16_384);
-            chunks.par_iter().for_each(|cells| {
-                for cell in *cells {
-                    draw_cell(
-                        points,
-                        cell,
-                        &view,
-                        camera,
-                        depth,
-                        &accum,
-                        Pass::Depth,
-                        true,
-                    );
-                }
-            });
-            chunks.par_iter().for_each(|cells| {
-                for cell in *cells {
-                    draw_cell(
-                        points,
-                        cell,
-                        &view,
-                        camera,
-                        depth,
-                        &accum,
-                        Pass::Accumulate,
-                        true,
-                    );
-                }
-            });
-        } else {
-            for pass in [Pass::Depth, Pass::Accumulate] {
-                for cell in &self.draw {
-                    draw_cell(points, cell, &view, camera, depth, &accum, pass, false);
-                }
+            let mut slices = Vec::with_capacity(chunks.len());
+            let mut rest = &mut self.splats[..];
+            for cells in &chunks {
+                let n: usize = cells.iter().map(|c| c.count as usize).sum();
+                let (head, tail) = rest.split_at_mut(n);
+                slices.push((*cells, head));
+                rest = tail;
             }
+            slices.par_iter_mut().for_each(|(cells, splats)| {
+                project_and_depth(points, cells, &view, camera, depth, splats, true);
+            });
+            self.splats
+                .par_chunks(16_384)
+                .for_each(|splats| accumulate(splats, &view, depth, accum, true));
+        } else {
+            project_and_depth(
+                points,
+                &self.draw,
+                &view,
+                camera,
+                depth,
+                &mut self.splats,
+                false,
+            );
+            accumulate(&self.splats, &view, depth, accum, false);
         }
 
         // Resolve.
@@ -323,8 +331,8 @@ impl Renderer {
         let mut pixels_hit = 0;
         for k in 0..valid.len() {
             let key = self.depth[k].load(Ordering::Relaxed);
-            let range_sum = self.range_sum[k].load(Ordering::Relaxed);
-            let sums = self.accum[k].load(Ordering::Relaxed);
+            let sums = self.accum[k][0].load(Ordering::Relaxed);
+            let range_sum = self.accum[k][1].load(Ordering::Relaxed);
             let count = sums & COUNT_MASK;
             if !valid[k] {
                 frame.intensity[k] = 0.0;
@@ -431,11 +439,21 @@ impl Renderer {
     }
 }
 
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Pass {
-    Depth,
-    Accumulate,
+/// A projected point, written by pass 1 and read by pass 2 (12 bytes).
+#[derive(Clone, Copy, Debug, Default)]
+struct Splat {
+    /// Column and row of the pixel containing the projection.
+    iu: i16,
+    iv: i16,
+    /// Half-width of the square splat, pixels; [`NOT_DRAWN`] if the point is not seen.
+    half: u16,
+    /// Intensity in 16-bit fixed point.
+    intensity: u16,
+    /// Range, metres.
+    range: f32,
 }
+
+const NOT_DRAWN: u16 = u16::MAX;
 
 /// Split the draw list into runs of about `target` points.
 fn chunk_cells(cells: &[DrawCell], target: usize) -> Vec<&[DrawCell]> {
@@ -456,47 +474,115 @@ fn chunk_cells(cells: &[DrawCell], target: usize) -> Vec<&[DrawCell]> {
     chunks
 }
 
-/// The accumulation buffers of pass 2.
-struct Accum<'a> {
-    /// `(Σ intensity << 24) | count`, fixed point.
-    sums: &'a [AtomicU64],
-    /// `Σ range`, fixed point.
-    ranges: &'a [AtomicU64],
+/// Round to the nearest integer for values in the range of pixel coordinates (no libm
+/// call: `floor` is not an instruction on baseline x86-64).
+#[inline(always)]
+fn round_px(x: f32) -> i32 {
+    // Clamp first: the projection of points near the domain's edge can be huge.
+    let x = x.clamp(-30_000.0, 30_000.0) + 0.5;
+    let t = x as i32; // truncation toward zero
+    if (t as f32) > x { t - 1 } else { t }
 }
 
+/// Pass 1 over the points of some cells: project each point once, keep its splat in
+/// `splats` (one slot per drawn point, in draw order), and take the minimum depth key
+/// over its footprint.
 #[inline(always)]
-fn draw_cell(
+fn project_and_depth(
     points: &[[f32; 4]],
-    cell: &DrawCell,
+    cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: &[AtomicU64],
-    accum: &Accum<'_>,
-    pass: Pass,
+    depth: &[AtomicU32],
+    splats: &mut [Splat],
     atomic: bool,
 ) {
-    let start = cell.start as usize;
-    let footprint = cell.spacing_m * view.alpha * view.splat_scale;
     let w = view.width as usize;
-    for (offset, p) in points[start..start + cell.count as usize]
-        .iter()
-        .enumerate()
-    {
-        let index = (start + offset) as u32;
-        let pc = view.rotation * Vec3::new(p[0], p[1], p[2]) + view.translation;
-        let Ok([u, v]) = camera.project_unbounded(pc.to_array()) else {
-            continue;
-        };
-        let rho = pc.length();
-        let dd = pc.z + view.xi * rho;
-        // Footprint in pixels: spacing · α/D · max((ρ + ξZ)/D, 1).
-        let size = footprint / dd * ((rho + view.xi * pc.z) / dd).max(1.0);
-        let half = (((size - 1.0) * 0.5).ceil().max(0.0) as i32).min(view.max_radius);
-        let iu = (u + 0.5).floor() as i32;
-        let iv = (v + 0.5).floor() as i32;
-        if iu + half < 0 || iv + half < 0 || iu - half >= view.width || iv - half >= view.height {
+    let mut slot = 0;
+    for cell in cells {
+        let start = cell.start as usize;
+        let footprint = cell.spacing_m * view.alpha * view.splat_scale;
+        for p in &points[start..start + cell.count as usize] {
+            let out = &mut splats[slot];
+            slot += 1;
+            out.half = NOT_DRAWN;
+            let pc = view.rotation * Vec3::new(p[0], p[1], p[2]) + view.translation;
+            let rho = pc.length();
+            let dd = pc.z + view.xi * rho;
+            if !(dd > 0.0) || (view.xi > 1.0 && !(view.xi * pc.z + rho > 0.0)) {
+                continue;
+            }
+            let inv_d = 1.0 / dd;
+            let [u, v] = if view.undistorted {
+                let (x, y) = (pc.x * inv_d, pc.y * inv_d);
+                [
+                    view.alpha_u * x + view.skew * y + view.u0,
+                    view.alpha_v * y + view.v0,
+                ]
+            } else {
+                match camera.project_unbounded(pc.to_array()) {
+                    Ok(pixel) => pixel,
+                    Err(_) => continue,
+                }
+            };
+            // Footprint in pixels: spacing · α/D · max((ρ + ξZ)/D, 1).
+            let size = footprint * inv_d * ((rho + view.xi * pc.z) * inv_d).max(1.0);
+            // ceil((size − 1)/2) without libm.
+            let h = ((size - 1.0) * 0.5).clamp(0.0, 1000.0);
+            let t = h as i32;
+            let half = (t + i32::from((t as f32) < h)).min(view.max_radius);
+            let iu = round_px(u);
+            let iv = round_px(v);
+            if iu + half < 0 || iv + half < 0 || iu - half >= view.width || iv - half >= view.height
+            {
+                continue;
+            }
+            *out = Splat {
+                iu: iu as i16,
+                iv: iv as i16,
+                half: half as u16,
+                intensity: (p[3] * INTENSITY_SCALE + 0.5) as u16,
+                range: rho,
+            };
+            let key = rho.to_bits();
+            let (u0, u1) = (
+                (iu - half).max(0) as usize,
+                (iu + half).min(view.width - 1) as usize,
+            );
+            let (v0, v1) = (
+                (iv - half).max(0) as usize,
+                (iv + half).min(view.height - 1) as usize,
+            );
+            for row in v0..=v1 {
+                for cell in &depth[row * w + u0..=row * w + u1] {
+                    if atomic {
+                        cell.fetch_min(key, Ordering::Relaxed);
+                    } else {
+                        // Branch-free: whether a point is nearer is unpredictable.
+                        cell.store(key.min(cell.load(Ordering::Relaxed)), Ordering::Relaxed);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Pass 2 over the splats of pass 1: add each sample to the pixels it covers where it
+/// lies within the depth band of the nearest.
+#[inline(always)]
+fn accumulate(
+    splats: &[Splat],
+    view: &View,
+    depth: &[AtomicU32],
+    accum: &[[AtomicU64; 2]],
+    atomic: bool,
+) {
+    let w = view.width as usize;
+    for s in splats {
+        if s.half == NOT_DRAWN {
             continue;
         }
+        let (iu, iv, half) = (i32::from(s.iu), i32::from(s.iv), i32::from(s.half));
         let (u0, u1) = (
             (iu - half).max(0) as usize,
             (iu + half).min(view.width - 1) as usize,
@@ -505,47 +591,24 @@ fn draw_cell(
             (iv - half).max(0) as usize,
             (iv + half).min(view.height - 1) as usize,
         );
-        let range_bits = rho.to_bits();
-        match pass {
-            Pass::Depth => {
-                let key = (u64::from(range_bits) << 32) | u64::from(index);
-                for row in v0..=v1 {
-                    for slot in &depth[row * w + u0..=row * w + u1] {
-                        if atomic {
-                            slot.fetch_min(key, Ordering::Relaxed);
-                        } else if key < slot.load(Ordering::Relaxed) {
-                            slot.store(key, Ordering::Relaxed);
-                        }
-                    }
-                }
-            }
-            Pass::Accumulate => {
-                let sample = (((p[3] * INTENSITY_SCALE).round() as u64) << COUNT_BITS) | 1;
-                let range_sample = (rho * RANGE_SCALE).round() as u64;
-                let limit = rho / (1.0 + view.depth_band);
-                for row in v0..=v1 {
-                    let base = row * w;
-                    for col in u0..=u1 {
-                        let nearest = f32::from_bits(
-                            (depth[base + col].load(Ordering::Relaxed) >> 32) as u32,
+        let sample = (u64::from(s.intensity) << COUNT_BITS) | 1;
+        let range_sample = (s.range * RANGE_SCALE + 0.5) as u64;
+        let limit = s.range / (1.0 + view.depth_band);
+        for row in v0..=v1 {
+            let base = row * w;
+            for col in u0..=u1 {
+                let nearest = f32::from_bits(depth[base + col].load(Ordering::Relaxed));
+                if nearest >= limit {
+                    let [slot, range] = &accum[base + col];
+                    if atomic {
+                        slot.fetch_add(sample, Ordering::Relaxed);
+                        range.fetch_add(range_sample, Ordering::Relaxed);
+                    } else {
+                        slot.store(slot.load(Ordering::Relaxed) + sample, Ordering::Relaxed);
+                        range.store(
+                            range.load(Ordering::Relaxed) + range_sample,
+                            Ordering::Relaxed,
                         );
-                        if nearest >= limit {
-                            let (slot, range) =
-                                (&accum.sums[base + col], &accum.ranges[base + col]);
-                            if atomic {
-                                slot.fetch_add(sample, Ordering::Relaxed);
-                                range.fetch_add(range_sample, Ordering::Relaxed);
-                            } else {
-                                slot.store(
-                                    slot.load(Ordering::Relaxed) + sample,
-                                    Ordering::Relaxed,
-                                );
-                                range.store(
-                                    range.load(Ordering::Relaxed) + range_sample,
-                                    Ordering::Relaxed,
-                                );
-                            }
-                        }
                     }
                 }
             }

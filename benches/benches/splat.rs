@@ -1,0 +1,51 @@
+//! `splat`: rendering the synthetic city (about 1 M and 6 M points) at 320×240 and
+//! 640×480 from street level, with and without level of detail, 1 and 2 threads.
+//! Throughput in points of the cloud per second.
+
+use benches::fixture_camera;
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::DVec3;
+use splat::city::{City, CityParams, camera_looking_down};
+use splat::{Frame, RenderOptions, Renderer};
+
+fn render(c: &mut Criterion) {
+    let mut group = c.benchmark_group("splat");
+    group.sample_size(10);
+    let pose = camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.1).inverse();
+    for (label, spacing_m) in [("1M", 0.12), ("6M", 0.05)] {
+        let city = City::generate(&CityParams {
+            spacing_m,
+            ..CityParams::default()
+        })
+        .unwrap();
+        eprintln!("city {label}: {} points", city.cloud.len());
+        group.throughput(Throughput::Elements(city.cloud.len() as u64));
+        for camera_name in ["omni-320x240.toml", "omni-640x480.toml"] {
+            let camera = fixture_camera(camera_name);
+            for (lod_label, lod) in [("lod", Some(0.5)), ("all", None)] {
+                for threads in [1, 2] {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    let options = RenderOptions {
+                        lod_spacing_px: lod,
+                        ..RenderOptions::default()
+                    };
+                    let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+                    let mut frame = Frame::for_camera(&camera);
+                    let name = format!("{label}/{}/{lod_label}/{threads}t", camera.width());
+                    group.bench_function(name, |b| {
+                        pool.install(|| {
+                            b.iter(|| renderer.render(&city.cloud, &pose, &mut frame).unwrap())
+                        })
+                    });
+                }
+            }
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, render);
+criterion_main!(benches);
