@@ -1,6 +1,12 @@
-//! The photometric (pixel brightness) feature of the PoVS baseline and its Jacobian.
-//!
-//! **Not implemented yet**: this crate has no API until issue #4 lands (see
-//! `docs/ARCHITECTURE.md` for what it will hold). It exists so that the workspace has
-//! its final shape and the crate name is reserved.
+#![doc = include_str!("../README.md")]
 #![deny(missing_docs)]
+
+mod error;
+mod feature;
+mod gradient;
+mod normal;
+
+pub use error::BrightnessError;
+pub use feature::Brightness;
+pub use gradient::masked_gradient;
+pub use normal::normal_equations;

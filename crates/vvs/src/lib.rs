@@ -1,6 +1,13 @@
-//! Virtual visual servoing: PGM (Rule0, Rule1, Rule2) and PoVS pose optimisation.
-//!
-//! **Not implemented yet**: this crate has no API until issue #5 lands (see
-//! `docs/ARCHITECTURE.md` for what it will hold). It exists so that the workspace has
-//! its final shape and the crate name is reserved.
+#![doc = include_str!("../README.md")]
 #![deny(missing_docs)]
+
+mod config;
+mod error;
+mod outcome;
+mod servo;
+pub mod solve;
+
+pub use config::{JacobianKind, Method, Robust, VvsConfig};
+pub use error::VvsError;
+pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
+pub use servo::Servo;

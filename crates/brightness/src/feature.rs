@@ -1,0 +1,188 @@
+//! [`Brightness`]: intensities of the valid pixels and their interaction matrix.
+
+use splat::{Frame, PixelStatus};
+use ucm::{Camera, PixelGrid};
+
+use crate::{BrightnessError, masked_gradient};
+
+/// The brightness feature of one camera, with its buffers (no allocation per image).
+#[derive(Debug, Clone)]
+pub struct Brightness {
+    grid: PixelGrid,
+    width: usize,
+    height: usize,
+    samples: Vec<u32>,
+    image: Vec<f32>,
+    inverse_range: Vec<f32>,
+    gradient: Vec<[f32; 2]>,
+    pixel_interaction: Vec<[f32; 6]>,
+    values: Vec<f32>,
+    interaction: Vec<[f32; 6]>,
+    normalize: bool,
+    scale: f32,
+}
+
+impl Brightness {
+    /// The feature for `camera`: one sample per valid pixel of its region.
+    pub fn new(camera: &Camera) -> Self {
+        let grid = PixelGrid::new(camera);
+        let samples: Vec<u32> = grid
+            .valid()
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| **v)
+            .map(|(k, _)| k as u32)
+            .collect();
+        let n = camera.pixel_count();
+        let m = samples.len();
+        Self {
+            grid,
+            width: camera.width() as usize,
+            height: camera.height() as usize,
+            samples,
+            image: vec![0.0; n],
+            inverse_range: vec![0.0; n],
+            gradient: vec![[0.0; 2]; n],
+            pixel_interaction: vec![[0.0; 6]; n],
+            values: vec![0.0; m],
+            interaction: vec![[0.0; 6]; m],
+            normalize: false,
+            scale: 1.0,
+        }
+    }
+
+    /// Centre and normalise the brightness (zero mean, unit norm over the valid pixels)
+    /// before use, as the paper does for real images (§4). The interaction matrix is
+    /// scaled by the same factor (the dependence of the mean and norm on the pose is
+    /// neglected, as usual).
+    pub fn with_normalization(mut self, normalize: bool) -> Self {
+        self.normalize = normalize;
+        self
+    }
+
+    /// Compute values and interaction matrix from a rendered or acquired frame.
+    /// Masked pixels are ignored; sky pixels have `1/ρ = 0`.
+    pub fn compute(&mut self, frame: &Frame) -> Result<(), BrightnessError> {
+        if frame.width() as usize != self.width || frame.height() as usize != self.height {
+            return Err(BrightnessError::ImageSize {
+                got_width: frame.width(),
+                got_height: frame.height(),
+                width: self.width as u32,
+                height: self.height as u32,
+            });
+        }
+        let valid = self.grid.valid();
+        for k in 0..self.image.len() {
+            let (i, r) = match frame.status[k] {
+                PixelStatus::Hit => (frame.intensity[k], 1.0 / frame.range_m[k]),
+                PixelStatus::Sky => (frame.intensity[k], 0.0),
+                PixelStatus::Masked => (0.0, 0.0),
+            };
+            self.image[k] = if valid[k] { i } else { 0.0 };
+            self.inverse_range[k] = if valid[k] { r } else { 0.0 };
+        }
+        self.scale = 1.0;
+        if self.normalize {
+            let m = self.samples.len().max(1) as f64;
+            let mean = self
+                .samples
+                .iter()
+                .map(|&k| f64::from(self.image[k as usize]))
+                .sum::<f64>()
+                / m;
+            let norm = self
+                .samples
+                .iter()
+                .map(|&k| (f64::from(self.image[k as usize]) - mean).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
+            for &k in &self.samples {
+                let k = k as usize;
+                self.image[k] = ((f64::from(self.image[k]) - mean) * scale) as f32;
+            }
+            self.scale = scale as f32;
+        }
+        masked_gradient(
+            &self.image,
+            valid,
+            self.width,
+            self.height,
+            &mut self.gradient,
+        );
+        let factors = self.grid.factors();
+        for k in 0..self.image.len() {
+            self.pixel_interaction[k] = if valid[k] {
+                factors[k].photometric(self.gradient[k], self.inverse_range[k])
+            } else {
+                [0.0; 6]
+            };
+        }
+        for (s, &k) in self.samples.iter().enumerate() {
+            self.values[s] = self.image[k as usize];
+            self.interaction[s] = self.pixel_interaction[k as usize];
+        }
+        Ok(())
+    }
+
+    /// Row-major pixel indices of the samples (the valid pixels).
+    pub fn samples(&self) -> &[u32] {
+        &self.samples
+    }
+
+    /// Intensity of every sample (after normalisation if enabled).
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    /// Interaction matrix row `∂I/∂v` of every sample.
+    pub fn interaction(&self) -> &[[f32; 6]] {
+        &self.interaction
+    }
+
+    /// The whole image as used (masked to 0 outside the region, normalised if enabled).
+    pub fn image(&self) -> &[f32] {
+        &self.image
+    }
+
+    /// Every pixel's interaction row (zero outside the region), row-major.
+    pub fn pixel_interaction(&self) -> &[[f32; 6]] {
+        &self.pixel_interaction
+    }
+
+    /// Every pixel's masked image gradient `(∂I/∂u, ∂I/∂v)`, row-major.
+    pub fn gradient(&self) -> &[[f32; 2]] {
+        &self.gradient
+    }
+
+    /// Every pixel's inverse range (0 for sky and outside the region), row-major.
+    pub fn inverse_range(&self) -> &[f32] {
+        &self.inverse_range
+    }
+
+    /// Validity of every pixel (the camera's region minus pixels the model cannot
+    /// invert).
+    pub fn valid(&self) -> &[bool] {
+        self.grid.valid()
+    }
+
+    /// The camera's pixel grid.
+    pub fn grid(&self) -> &PixelGrid {
+        &self.grid
+    }
+
+    /// Image width, pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Image height, pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The factor applied by normalisation to the last image (1 without).
+    pub fn normalization_scale(&self) -> f32 {
+        self.scale
+    }
+}

@@ -1,0 +1,320 @@
+//! [`Pgm`]: the photometric Gaussian mixture of an omnidirectional image, its
+//! λ-derivative and its interaction matrix, on a fixed sample grid.
+
+use brightness::Brightness;
+use splat::Frame;
+use ucm::Camera;
+
+use crate::PgmError;
+use crate::convolve::{self, Kernels};
+
+/// Supported Gaussian extents, pixels.
+pub const LAMBDA_RANGE: std::ops::RangeInclusive<f32> = 0.5..=40.0;
+
+/// Which interaction matrix `L_G` to compute (`../shared/notes/math.md`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PgmJacobian {
+    /// The derivative of what is computed on the fixed pixel grid:
+    /// `L_G = g_λ ⊛ (mask · L_I)`, six separable convolutions of the per-pixel
+    /// photometric interaction rows (gradient inside the valid region, `1/ρ = 0` for
+    /// sky).
+    Convolved,
+    /// The paper's eq. (5): `L_G(u_g) = −∇G(u_g)ᵀ ∂u_g/∂v`, the UCM interaction matrix at
+    /// the sample with the sample's own rendered range. It treats the static edge of
+    /// the mask as moving with the scene; samples closer to that edge than
+    /// `edge_margin` × λ pixels get weight 0 when `edge_margin` is given (3 is where
+    /// the notes' prototype saw eq. (5) agree with finite differences again).
+    Paper {
+        /// Drop samples within this many λ of the mask's edge.
+        edge_margin: Option<f32>,
+    },
+}
+
+/// Options of the transform.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PgmOptions {
+    /// Kernel radius in units of λ (rounded up to whole pixels). Default 4: the
+    /// truncated tail weighs `exp(−8) ≈ 3.4e−4` of the peak.
+    pub kernel_radius_lambdas: f32,
+    /// Sample every `stride`-th pixel in both directions (1: every pixel). For a large
+    /// λ the mixture is smooth and a coarser grid loses little; the cost of the
+    /// vertical passes falls by the stride.
+    pub stride: u32,
+    /// Centre and normalise the brightness (zero mean, unit norm over the valid
+    /// pixels) before the transform, as the paper does for real images (§4).
+    pub normalize: bool,
+}
+
+impl Default for PgmOptions {
+    fn default() -> Self {
+        Self {
+            kernel_radius_lambdas: 4.0,
+            stride: 1,
+            normalize: false,
+        }
+    }
+}
+
+/// The PGM feature of one camera, with its buffers (no allocation per image once the
+/// largest λ has been seen).
+#[derive(Debug, Clone)]
+pub struct Pgm {
+    brightness: Brightness,
+    options: PgmOptions,
+    width: usize,
+    height: usize,
+    samples: Vec<u32>,
+    sample_rows: Vec<usize>,
+    edge_distance_px: Vec<f32>,
+    // Full-image planes.
+    h_g: Vec<f32>,
+    h_k2g: Vec<f32>,
+    h_dg: Vec<f32>,
+    plane: Vec<f32>,
+    out: Vec<f32>,
+    out2: Vec<f32>,
+    // Per-sample outputs.
+    values: Vec<f32>,
+    j_lambda: Vec<f32>,
+    interaction: Vec<[f32; 6]>,
+    weights: Vec<f32>,
+}
+
+impl Pgm {
+    /// The feature for `camera`. Samples are the valid pixels on the stride lattice.
+    pub fn new(camera: &Camera, options: PgmOptions) -> Result<Self, PgmError> {
+        if !(options.kernel_radius_lambdas >= 1.0 && options.kernel_radius_lambdas.is_finite()) {
+            return Err(PgmError::Option {
+                name: "kernel_radius_lambdas",
+                message: format!("must be >= 1, got {}", options.kernel_radius_lambdas),
+            });
+        }
+        if options.stride == 0 {
+            return Err(PgmError::Option {
+                name: "stride",
+                message: "must be >= 1".into(),
+            });
+        }
+        let brightness = Brightness::new(camera).with_normalization(options.normalize);
+        let (width, height) = (camera.width() as usize, camera.height() as usize);
+        let s = options.stride as usize;
+        let valid = brightness.valid();
+        let samples: Vec<u32> = (0..height)
+            .step_by(s)
+            .flat_map(|j| (0..width).step_by(s).map(move |i| j * width + i))
+            .filter(|&k| valid[k])
+            .map(|k| k as u32)
+            .collect();
+        let mut sample_rows: Vec<usize> = samples.iter().map(|&k| k as usize / width).collect();
+        sample_rows.dedup();
+        let edge_distance_px = edge_distance(valid, width, height);
+        let n = width * height;
+        let m = samples.len();
+        Ok(Self {
+            brightness,
+            options,
+            width,
+            height,
+            samples,
+            sample_rows,
+            edge_distance_px,
+            h_g: vec![0.0; n],
+            h_k2g: vec![0.0; n],
+            h_dg: vec![0.0; n],
+            plane: vec![0.0; n],
+            out: vec![0.0; n],
+            out2: vec![0.0; n],
+            values: vec![0.0; m],
+            j_lambda: vec![0.0; m],
+            interaction: vec![[0.0; 6]; m],
+            weights: vec![1.0; m],
+        })
+    }
+
+    fn check_lambda(lambda: f32) -> Result<(), PgmError> {
+        if LAMBDA_RANGE.contains(&lambda) {
+            Ok(())
+        } else {
+            Err(PgmError::Lambda(lambda))
+        }
+    }
+
+    fn kernels(&self, lambda: f32) -> Kernels {
+        let radius = (self.options.kernel_radius_lambdas * lambda).ceil() as usize;
+        Kernels::new(lambda, radius.max(1))
+    }
+
+    /// `G(I, λ)` at the samples only (for the desired image).
+    pub fn transform(&mut self, frame: &Frame, lambda: f32) -> Result<&[f32], PgmError> {
+        Self::check_lambda(lambda)?;
+        self.brightness.compute(frame)?;
+        let k = self.kernels(lambda);
+        let w = self.width;
+        convolve::rows(self.brightness.image(), &mut self.h_g, w, &k.g);
+        convolve::columns(
+            &self.h_g,
+            &mut self.out,
+            w,
+            self.height,
+            &k.g,
+            &self.sample_rows,
+        );
+        for (v, &s) in self.values.iter_mut().zip(&self.samples) {
+            *v = self.out[s as usize];
+        }
+        Ok(&self.values)
+    }
+
+    /// `G`, `J_λ = ∂G/∂λ` and the interaction matrix `L_G` at the samples.
+    pub fn compute(
+        &mut self,
+        frame: &Frame,
+        lambda: f32,
+        jacobian: PgmJacobian,
+    ) -> Result<(), PgmError> {
+        Self::check_lambda(lambda)?;
+        self.brightness.compute(frame)?;
+        let k = self.kernels(lambda);
+        let (w, h) = (self.width, self.height);
+        let image = self.brightness.image();
+        convolve::rows(image, &mut self.h_g, w, &k.g);
+        convolve::rows(image, &mut self.h_k2g, w, &k.k2g);
+        // G.
+        convolve::columns(&self.h_g, &mut self.out, w, h, &k.g, &self.sample_rows);
+        for (v, &s) in self.values.iter_mut().zip(&self.samples) {
+            *v = self.out[s as usize];
+        }
+        // J_λ = (1/λ³) [ (k² g)_rows g_cols + g_rows (k² g)_cols ] ⊛ I.
+        convolve::columns(&self.h_k2g, &mut self.out, w, h, &k.g, &self.sample_rows);
+        convolve::add_columns(&self.h_g, &mut self.out, w, h, &k.k2g, &self.sample_rows);
+        let inv_l3 = 1.0 / (lambda * lambda * lambda);
+        for (j, &s) in self.j_lambda.iter_mut().zip(&self.samples) {
+            *j = self.out[s as usize] * inv_l3;
+        }
+        match jacobian {
+            PgmJacobian::Convolved => {
+                // Six separable convolutions of the masked per-pixel rows L_I.
+                for c in 0..6 {
+                    for (p, row) in self
+                        .plane
+                        .iter_mut()
+                        .zip(self.brightness.pixel_interaction())
+                    {
+                        *p = row[c];
+                    }
+                    convolve::rows(&self.plane, &mut self.out2, w, &k.g);
+                    convolve::columns(&self.out2, &mut self.out, w, h, &k.g, &self.sample_rows);
+                    for (l, &s) in self.interaction.iter_mut().zip(&self.samples) {
+                        l[c] = self.out[s as usize];
+                    }
+                }
+                self.weights.fill(1.0);
+            }
+            PgmJacobian::Paper { edge_margin } => {
+                // ∇G at the samples: ∂G/∂u = (dg rows, g cols), ∂G/∂v = (g rows, dg cols).
+                convolve::rows(image, &mut self.h_dg, w, &k.dg);
+                convolve::columns(&self.h_dg, &mut self.out, w, h, &k.g, &self.sample_rows);
+                convolve::columns(&self.h_g, &mut self.out2, w, h, &k.dg, &self.sample_rows);
+                let factors = self.brightness.grid().factors();
+                let inverse_range = self.brightness.inverse_range();
+                for ((l, &s), wgt) in self
+                    .interaction
+                    .iter_mut()
+                    .zip(&self.samples)
+                    .zip(&mut self.weights)
+                {
+                    let s = s as usize;
+                    *l = factors[s].photometric([self.out[s], self.out2[s]], inverse_range[s]);
+                    *wgt = match edge_margin {
+                        Some(m) if self.edge_distance_px[s] < m * lambda => 0.0,
+                        _ => 1.0,
+                    };
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Row-major pixel indices of the samples.
+    pub fn samples(&self) -> &[u32] {
+        &self.samples
+    }
+
+    /// `G` at the samples (from the last call).
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    /// `J_λ = ∂G/∂λ` at the samples (from the last [`Pgm::compute`]).
+    pub fn j_lambda(&self) -> &[f32] {
+        &self.j_lambda
+    }
+
+    /// `L_G` rows at the samples (from the last [`Pgm::compute`]).
+    pub fn interaction(&self) -> &[[f32; 6]] {
+        &self.interaction
+    }
+
+    /// Weight of every sample (0 for samples dropped near the mask's edge by
+    /// [`PgmJacobian::Paper`] with a margin, 1 otherwise).
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+
+    /// Distance of every pixel to the nearest pixel outside the valid region (or
+    /// outside the image), pixels (chamfer 3-4 approximation of the Euclidean
+    /// distance).
+    pub fn edge_distance_px(&self) -> &[f32] {
+        &self.edge_distance_px
+    }
+
+    /// The brightness stage (the masked, possibly normalised image and its gradient).
+    pub fn brightness(&self) -> &Brightness {
+        &self.brightness
+    }
+
+    /// The options.
+    pub fn options(&self) -> &PgmOptions {
+        &self.options
+    }
+}
+
+/// Chamfer (3-4) distance of every valid pixel to the nearest invalid pixel, the image
+/// border counting as invalid.
+fn edge_distance(valid: &[bool], width: usize, height: usize) -> Vec<f32> {
+    let big = u32::MAX / 4;
+    let mut d: Vec<u32> = valid.iter().map(|&v| if v { big } else { 0 }).collect();
+    let at = |i: isize, j: isize| -> Option<usize> {
+        (i >= 0 && j >= 0 && (i as usize) < width && (j as usize) < height)
+            .then(|| j as usize * width + i as usize)
+    };
+    // Forward pass.
+    for j in 0..height as isize {
+        for i in 0..width as isize {
+            let k = at(i, j).unwrap_or(0);
+            if d[k] == 0 {
+                continue;
+            }
+            let mut best = d[k];
+            for (di, dj, c) in [(-1, 0, 3), (0, -1, 3), (-1, -1, 4), (1, -1, 4)] {
+                best = best.min(at(i + di, j + dj).map_or(c, |n| d[n] + c));
+            }
+            d[k] = best;
+        }
+    }
+    // Backward pass.
+    for j in (0..height as isize).rev() {
+        for i in (0..width as isize).rev() {
+            let k = at(i, j).unwrap_or(0);
+            if d[k] == 0 {
+                continue;
+            }
+            let mut best = d[k];
+            for (di, dj, c) in [(1, 0, 3), (0, 1, 3), (1, 1, 4), (-1, 1, 4)] {
+                best = best.min(at(i + di, j + dj).map_or(c, |n| d[n] + c));
+            }
+            d[k] = best;
+        }
+    }
+    d.into_iter().map(|v| v as f32 / 3.0).collect()
+}

@@ -1,0 +1,5 @@
+//! Integration tests of `pgm`, one binary (modules below) for fast linking.
+
+mod common;
+mod pipeline;
+mod transform;

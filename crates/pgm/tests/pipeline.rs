@@ -1,0 +1,114 @@
+//! `L_G` (both forms) and `L_I` against the finite difference of the whole pipeline:
+//! render the city at a pose, move the camera by exp(±ε v) along each axis, render,
+//! transform, compare `(F(r⁺) − F(r⁻))/2ε` with `L v` over all samples.
+
+use brightness::Brightness;
+use pgm::{Pgm, PgmJacobian, PgmOptions};
+
+use crate::common::*;
+
+const AXES: [&str; 6] = ["tx", "ty", "tz", "wx", "wy", "wz"];
+
+fn unit(axis: usize) -> [f64; 6] {
+    let mut v = [0.0; 6];
+    v[axis] = 1.0;
+    v
+}
+
+/// Steps of the finite differences: 2 cm, 0.4°. Smaller steps are dominated by the
+/// discreteness of the rendering.
+fn eps(axis: usize) -> f64 {
+    if axis < 3 { 0.02 } else { 0.4f64.to_radians() }
+}
+
+fn lg_cosines(jacobian: PgmJacobian, lambda: f32) -> Vec<(f64, f64)> {
+    let camera = fixture("omni-320x240.toml");
+    let pose = street_pose();
+    let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
+    pgm.compute(&render(&camera, &pose), lambda, jacobian)
+        .unwrap();
+    let rows = pgm.interaction().to_vec();
+    let weights = pgm.weights().to_vec();
+    (0..6)
+        .map(|axis| {
+            let numeric = pipeline_difference(&camera, &pose, unit(axis), eps(axis), |frame| {
+                pgm.transform(frame, lambda).unwrap().to_vec()
+            });
+            let keep: Vec<usize> = (0..rows.len()).filter(|&s| weights[s] > 0.0).collect();
+            let analytic: Vec<f64> = keep.iter().map(|&s| f64::from(rows[s][axis])).collect();
+            let numeric: Vec<f64> = keep.iter().map(|&s| numeric[s]).collect();
+            compare(&analytic, &numeric)
+        })
+        .collect()
+}
+
+#[test]
+fn convolved_lg_matches_the_pipeline() {
+    let result = lg_cosines(PgmJacobian::Convolved, 15.0);
+    for (axis, (cos, rel)) in result.iter().enumerate() {
+        eprintln!(
+            "Convolved λ=15 {}: cosine {cos:.3}, relative error {rel:.3}",
+            AXES[axis]
+        );
+    }
+    for (axis, (cos, _)) in result.iter().enumerate() {
+        assert!(*cos > 0.85, "{}: cosine {cos}", AXES[axis]);
+    }
+}
+
+#[test]
+fn paper_lg_is_wrong_near_the_mask_edge() {
+    let plain = lg_cosines(PgmJacobian::Paper { edge_margin: None }, 15.0);
+    let margin = lg_cosines(
+        PgmJacobian::Paper {
+            edge_margin: Some(3.0),
+        },
+        15.0,
+    );
+    for axis in 0..6 {
+        eprintln!(
+            "Paper λ=15 {}: cosine {:.3} (all samples), {:.3} (beyond 3λ of the edge)",
+            AXES[axis], plain[axis].0, margin[axis].0
+        );
+    }
+    let mean = |v: &[(f64, f64)]| v.iter().map(|c| c.0).sum::<f64>() / 6.0;
+    assert!(
+        mean(&margin) > mean(&plain) + 0.1,
+        "{} vs {}",
+        mean(&margin),
+        mean(&plain)
+    );
+    let convolved = lg_cosines(PgmJacobian::Convolved, 15.0);
+    assert!(
+        mean(&convolved) > mean(&plain) + 0.2,
+        "{} vs {}",
+        mean(&convolved),
+        mean(&plain)
+    );
+}
+
+#[test]
+fn brightness_li_matches_the_pipeline() {
+    let camera = fixture("omni-320x240.toml");
+    let pose = street_pose();
+    let mut feature = Brightness::new(&camera);
+    feature.compute(&render(&camera, &pose)).unwrap();
+    let rows = feature.interaction().to_vec();
+    let mut cosines = Vec::new();
+    for axis in 0..6 {
+        let numeric = pipeline_difference(&camera, &pose, unit(axis), eps(axis), |frame| {
+            feature.compute(frame).unwrap();
+            feature.values().to_vec()
+        });
+        let analytic: Vec<f64> = rows.iter().map(|r| f64::from(r[axis])).collect();
+        let (cos, rel) = compare(&analytic, &numeric);
+        eprintln!(
+            "L_I {}: cosine {cos:.3}, relative error {rel:.3}",
+            AXES[axis]
+        );
+        cosines.push(cos);
+    }
+    for (axis, cos) in cosines.iter().enumerate() {
+        assert!(*cos > 0.3, "{}: cosine {cos}", AXES[axis]);
+    }
+}

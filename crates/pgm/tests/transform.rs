@@ -1,0 +1,207 @@
+//! The transform against the brute-force sum of eq. (1), J_λ against a central
+//! difference in λ, options and errors.
+
+use pgm::{Pgm, PgmError, PgmJacobian, PgmOptions};
+use proptest::prelude::*;
+use splat::{Frame, PixelStatus};
+use ucm::{Camera, Intrinsics, Mask, ValidRegion};
+
+fn small_camera(mask: Vec<bool>) -> Camera {
+    Camera::new(
+        Intrinsics {
+            alpha_u: 10.0,
+            alpha_v: 10.0,
+            u0: 11.5,
+            v0: 8.5,
+            xi: 0.9,
+            skew: 0.0,
+        },
+        None,
+        24,
+        18,
+        ValidRegion::Mask(Mask::new(24, 18, mask).unwrap()),
+    )
+    .unwrap()
+}
+
+fn frame_of(camera: &Camera, image: &[f32]) -> Frame {
+    let mut frame = Frame::for_camera(camera);
+    for (k, &v) in image.iter().enumerate() {
+        frame.intensity[k] = v;
+        frame.range_m[k] = 3.0;
+        frame.status[k] = if camera.valid_pixels()[k] {
+            PixelStatus::Hit
+        } else {
+            PixelStatus::Masked
+        };
+    }
+    frame
+}
+
+/// Eq. (1) summed literally over the valid pixels.
+fn brute_force(camera: &Camera, image: &[f32], lambda: f64, sample: usize) -> (f64, f64) {
+    let w = camera.width() as usize;
+    let (ug, vg) = ((sample % w) as f64, (sample / w) as f64);
+    let (mut g, mut j) = (0.0, 0.0);
+    for (k, &v) in image.iter().enumerate() {
+        if !camera.valid_pixels()[k] {
+            continue;
+        }
+        let d2 = ((k % w) as f64 - ug).powi(2) + ((k / w) as f64 - vg).powi(2);
+        let e = (-d2 / (2.0 * lambda * lambda)).exp();
+        g += f64::from(v) * e;
+        j += f64::from(v) * d2 * e / lambda.powi(3);
+    }
+    (g, j)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// G and J_λ against eq. (1) and its derivative, on random images and masks, for
+    /// λ from 0.5 to 40 (kernel radius wide enough to cover the whole image).
+    #[test]
+    fn transform_matches_brute_force(
+        image in prop::collection::vec(0.0f32..1.0, 24 * 18),
+        mask in prop::collection::vec(prop::bool::weighted(0.8), 24 * 18),
+        lambda in prop_oneof![0.5f32..2.0, 2.0f32..10.0, 10.0f32..40.0],
+    ) {
+        prop_assume!(mask.iter().filter(|&&m| m).count() > 10);
+        let camera = small_camera(mask);
+        let frame = frame_of(&camera, &image);
+        let radius = (30.0 / lambda).max(4.0);
+        let mut pgm = Pgm::new(&camera, PgmOptions { kernel_radius_lambdas: radius, ..PgmOptions::default() }).unwrap();
+        pgm.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
+        let masked: Vec<f32> = image.iter().zip(camera.valid_pixels()).map(|(&v, &ok)| if ok { v } else { 0.0 }).collect();
+        let scale = masked.iter().sum::<f32>() as f64 + 1e-3;
+        for (s, &k) in pgm.samples().iter().enumerate() {
+            let (g, j) = brute_force(&camera, &image, f64::from(lambda), k as usize);
+            prop_assert!((f64::from(pgm.values()[s]) - g).abs() < 1e-5 * scale, "G at {k}: {} vs {g}", pgm.values()[s]);
+            prop_assert!((f64::from(pgm.j_lambda()[s]) - j).abs() < 1e-4 * scale, "J at {k}: {} vs {j}", pgm.j_lambda()[s]);
+        }
+    }
+}
+
+/// J_λ against a central difference of G in λ (default kernel radius).
+#[test]
+fn j_lambda_matches_central_difference_in_lambda() {
+    let mask = vec![true; 24 * 18];
+    let camera = small_camera(mask);
+    let image: Vec<f32> = (0..24 * 18)
+        .map(|k| ((k * 37 % 101) as f32) / 100.0)
+        .collect();
+    let frame = frame_of(&camera, &image);
+    let options = PgmOptions {
+        kernel_radius_lambdas: 12.0,
+        ..PgmOptions::default()
+    };
+    let mut pgm = Pgm::new(&camera, options).unwrap();
+    for lambda in [0.7f32, 1.0, 3.0, 7.5] {
+        let h = 1e-2 * lambda;
+        pgm.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
+        let analytic = pgm.j_lambda().to_vec();
+        let plus = pgm.transform(&frame, lambda + h).unwrap().to_vec();
+        let minus = pgm.transform(&frame, lambda - h).unwrap().to_vec();
+        for s in 0..analytic.len() {
+            let numeric = (f64::from(plus[s]) - f64::from(minus[s])) / (2.0 * f64::from(h));
+            assert!(
+                (f64::from(analytic[s]) - numeric).abs() < 2e-3 * (numeric.abs() + 1.0),
+                "λ {lambda}, sample {s}: {} vs {numeric}",
+                analytic[s]
+            );
+        }
+    }
+}
+
+#[test]
+fn stride_subsamples_the_full_grid() {
+    let camera =
+        Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
+    let frame = crate::common::render(&camera, &crate::common::street_pose());
+    let mut full = Pgm::new(&camera, PgmOptions::default()).unwrap();
+    let mut coarse = Pgm::new(
+        &camera,
+        PgmOptions {
+            stride: 4,
+            ..PgmOptions::default()
+        },
+    )
+    .unwrap();
+    full.compute(&frame, 15.0, PgmJacobian::Convolved).unwrap();
+    coarse
+        .compute(&frame, 15.0, PgmJacobian::Convolved)
+        .unwrap();
+    assert!(coarse.samples().len() * 12 < full.samples().len());
+    for (s, &k) in coarse.samples().iter().enumerate() {
+        let f = full.samples().binary_search(&k).unwrap();
+        assert_eq!(coarse.values()[s], full.values()[f]);
+        assert_eq!(coarse.interaction()[s], full.interaction()[f]);
+    }
+}
+
+#[test]
+fn bad_lambda_and_options_are_errors() {
+    let camera = small_camera(vec![true; 24 * 18]);
+    let frame = frame_of(&camera, &[0.5; 24 * 18]);
+    let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
+    for bad in [0.1f32, 41.0, f32::NAN, -3.0] {
+        assert!(matches!(
+            pgm.compute(&frame, bad, PgmJacobian::Convolved),
+            Err(PgmError::Lambda(_))
+        ));
+    }
+    assert!(
+        Pgm::new(
+            &camera,
+            PgmOptions {
+                stride: 0,
+                ..PgmOptions::default()
+            }
+        )
+        .is_err()
+    );
+    assert!(
+        Pgm::new(
+            &camera,
+            PgmOptions {
+                kernel_radius_lambdas: 0.0,
+                ..PgmOptions::default()
+            }
+        )
+        .is_err()
+    );
+    let wrong = Frame::new(10, 10);
+    assert!(matches!(
+        pgm.compute(&wrong, 2.0, PgmJacobian::Convolved),
+        Err(PgmError::Brightness(_))
+    ));
+}
+
+#[test]
+fn normalization_centres_and_scales() {
+    let camera = small_camera(vec![true; 24 * 18]);
+    let image: Vec<f32> = (0..24 * 18)
+        .map(|k| 0.3 + ((k * 13 % 7) as f32) / 10.0)
+        .collect();
+    let frame = frame_of(&camera, &image);
+    let mut pgm = Pgm::new(
+        &camera,
+        PgmOptions {
+            normalize: true,
+            ..PgmOptions::default()
+        },
+    )
+    .unwrap();
+    pgm.compute(&frame, 2.0, PgmJacobian::Convolved).unwrap();
+    let used = pgm.brightness().image();
+    let mean: f64 = used.iter().map(|&v| f64::from(v)).sum::<f64>() / used.len() as f64;
+    let norm: f64 = used
+        .iter()
+        .map(|&v| f64::from(v).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        mean.abs() < 1e-6 && (norm - 1.0).abs() < 1e-5,
+        "{mean} {norm}"
+    );
+}

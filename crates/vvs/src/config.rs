@@ -1,0 +1,220 @@
+//! Configuration of the optimiser: plain structs, (de)serialisable as TOML, every field
+//! documented. Defaults are the paper's (§3.1) and `../shared/notes/math.md`'s.
+
+use serde::{Deserialize, Serialize};
+
+use crate::VvsError;
+
+/// Which method aligns the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Photometric omnidirectional visual servoing (the paper's ref. 14, Caron et al. 2013): `e = I(r) − I*`, 6 unknowns.
+    Povs,
+    /// PGM, the rule of the paper's ref. 10 (Crombez et al. 2019): step 1 with λ starting at `rule0_lambda_factor` × λ*₁ and
+    /// optimised; step 2 with λ = λ*₂ constant.
+    Rule0,
+    /// PGM: step 1 with λ starting at λ*₁, optimised; step 2 with λ = λ*₂ constant.
+    Rule1,
+    /// PGM: step 1 as Rule1; step 2 with λ starting at λ*₂, optimised.
+    Rule2,
+}
+
+impl Method {
+    /// Every method, in the paper's order of presentation.
+    pub const ALL: [Method; 4] = [Method::Povs, Method::Rule0, Method::Rule1, Method::Rule2];
+
+    /// Short name (`povs`, `rule0`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Povs => "povs",
+            Method::Rule0 => "rule0",
+            Method::Rule1 => "rule1",
+            Method::Rule2 => "rule2",
+        }
+    }
+}
+
+/// Which PGM interaction matrix the optimiser uses.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum JacobianKind {
+    /// The derivative of the re-rendered PGM, `g_λ ⊛ (mask · L_I)`.
+    Convolved,
+    /// The paper's eq. (5), optionally dropping samples within `edge_margin` × λ of the
+    /// mask's edge.
+    Paper {
+        /// Margin in units of λ, or none.
+        #[serde(default)]
+        edge_margin: Option<f32>,
+    },
+}
+
+impl JacobianKind {
+    pub(crate) fn to_pgm(self) -> pgm::PgmJacobian {
+        match self {
+            JacobianKind::Convolved => pgm::PgmJacobian::Convolved,
+            JacobianKind::Paper { edge_margin } => pgm::PgmJacobian::Paper { edge_margin },
+        }
+    }
+
+    /// Short name (`convolved`, `paper`, `paper-margin3`, …).
+    pub fn name(self) -> String {
+        match self {
+            JacobianKind::Convolved => "convolved".into(),
+            JacobianKind::Paper { edge_margin: None } => "paper".into(),
+            JacobianKind::Paper {
+                edge_margin: Some(m),
+            } => format!("paper-margin{m}"),
+        }
+    }
+}
+
+/// Robust (M-estimator) weighting of the residuals.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Robust {
+    /// Tukey's biweight with threshold `c` × the residuals' robust scale
+    /// (1.4826 × median absolute deviation); `c` = 4.685 is the usual choice.
+    Tukey {
+        /// Threshold in robust standard deviations.
+        c: f32,
+    },
+}
+
+/// Every setting of the optimiser.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VvsConfig {
+    /// Control gain μ of `[vᵀ, λ̇]ᵀ = −μ [L_G J_λ]⁺ e`. Paper: 0.2.
+    pub gain: f64,
+    /// λ* of step 1 (pixels): the extent of the desired PGM. Paper: 15.
+    pub lambda_star_step1: f32,
+    /// λ* of step 2 (pixels). Paper: 1.
+    pub lambda_star_step2: f32,
+    /// Rule0's initial λ of step 1 as a multiple of λ*₁. Paper (ref. 10): 2.
+    pub rule0_lambda_factor: f32,
+    /// Iteration budget of step 1. Paper: 120.
+    pub step1_max_iterations: usize,
+    /// Total iteration budget (both steps, or PoVS). Paper: 250.
+    pub max_iterations: usize,
+    /// PGM interaction matrix.
+    pub jacobian: JacobianKind,
+    /// A stage has converged when an iteration moves the camera by less than this
+    /// (metres)…
+    pub converged_translation_m: f64,
+    /// …and rotates it by less than this (radians), and changes λ by less than 1e-4 px.
+    pub converged_rotation_rad: f64,
+    /// Divergence: the cost exceeds this multiple of the stage's initial cost.
+    pub divergence_cost_factor: f64,
+    /// Divergence: fewer than this fraction of the valid pixels see a point.
+    pub min_hit_fraction: f64,
+    /// Divergence: the camera leaves the cloud's bounding box enlarged by this (m).
+    pub bounds_margin_m: f64,
+    /// Beyond the paper (off by default): Levenberg–Marquardt damping `η`, solving
+    /// `(JᵀJ + η diag(JᵀJ)) x = Jᵀe`.
+    pub levenberg_marquardt: Option<f64>,
+    /// Beyond the paper (off by default): robust weighting of the residuals.
+    pub robust: Option<Robust>,
+    /// Centre and normalise the brightness of both images (§4, for real images).
+    pub normalize: bool,
+    /// PGM sample stride (1: every pixel).
+    pub pgm_stride: u32,
+    /// Renderer level of detail (pixels between drawn points), `None` for every point.
+    pub lod_spacing_px: Option<f32>,
+    /// Keep the per-iteration history in the outcome.
+    pub keep_history: bool,
+}
+
+impl Default for VvsConfig {
+    fn default() -> Self {
+        Self {
+            gain: 0.2,
+            lambda_star_step1: 15.0,
+            lambda_star_step2: 1.0,
+            rule0_lambda_factor: 2.0,
+            step1_max_iterations: 120,
+            max_iterations: 250,
+            jacobian: JacobianKind::Convolved,
+            converged_translation_m: 2e-5,
+            converged_rotation_rad: 2e-5,
+            divergence_cost_factor: 1e3,
+            min_hit_fraction: 0.02,
+            bounds_margin_m: 5.0,
+            levenberg_marquardt: None,
+            robust: None,
+            normalize: false,
+            pgm_stride: 1,
+            lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
+            keep_history: true,
+        }
+    }
+}
+
+impl VvsConfig {
+    /// Check every field against its documented range.
+    pub fn validate(&self) -> Result<(), VvsError> {
+        let bad = |name: &'static str, message: String| Err(VvsError::Config { name, message });
+        if !(self.gain > 0.0 && self.gain <= 1.0) {
+            return bad("gain", format!("must be in (0, 1], got {}", self.gain));
+        }
+        for (name, l) in [
+            ("lambda_star_step1", self.lambda_star_step1),
+            ("lambda_star_step2", self.lambda_star_step2),
+            (
+                "rule0_lambda_factor × lambda_star_step1",
+                self.rule0_lambda_factor * self.lambda_star_step1,
+            ),
+        ] {
+            if !pgm::LAMBDA_RANGE.contains(&l) {
+                return bad(name, format!("{l} is outside [0.5, 40] px"));
+            }
+        }
+        if self.step1_max_iterations > self.max_iterations {
+            return bad("step1_max_iterations", "exceeds max_iterations".into());
+        }
+        for (name, v) in [
+            ("converged_translation_m", self.converged_translation_m),
+            ("converged_rotation_rad", self.converged_rotation_rad),
+            ("divergence_cost_factor", self.divergence_cost_factor),
+            ("bounds_margin_m", self.bounds_margin_m),
+        ] {
+            if !(v > 0.0 && v.is_finite()) {
+                return bad(name, format!("must be > 0, got {v}"));
+            }
+        }
+        if !(0.0..1.0).contains(&self.min_hit_fraction) {
+            return bad(
+                "min_hit_fraction",
+                format!("must be in [0, 1), got {}", self.min_hit_fraction),
+            );
+        }
+        if let Some(eta) = self.levenberg_marquardt
+            && !(eta >= 0.0 && eta.is_finite())
+        {
+            return bad("levenberg_marquardt", format!("must be >= 0, got {eta}"));
+        }
+        if let Some(Robust::Tukey { c }) = self.robust
+            && !(c > 0.0 && c.is_finite())
+        {
+            return bad("robust", format!("Tukey c must be > 0, got {c}"));
+        }
+        if self.pgm_stride == 0 {
+            return bad("pgm_stride", "must be >= 1".into());
+        }
+        Ok(())
+    }
+
+    /// Parse a TOML configuration (missing fields take their defaults; unknown fields
+    /// are errors) and validate it.
+    pub fn from_toml_str(text: &str) -> Result<Self, VvsError> {
+        let config: Self = toml::from_str(text).map_err(|e| VvsError::ConfigFile(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The configuration as TOML.
+    pub fn to_toml_string(&self) -> Result<String, VvsError> {
+        toml::to_string_pretty(self).map_err(|e| VvsError::ConfigFile(e.to_string()))
+    }
+}

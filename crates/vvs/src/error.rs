@@ -1,0 +1,43 @@
+//! The one error type of the crate.
+
+/// Invalid input to the optimiser. A run that diverges is not an error: it returns an
+/// [`crate::Outcome`] whose [`crate::StopReason`] says so.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum VvsError {
+    /// A configuration value out of its documented range.
+    #[error("invalid configuration `{name}`: {message}")]
+    Config {
+        /// The field.
+        name: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// A configuration file that cannot be read or parsed.
+    #[error("configuration file: {0}")]
+    ConfigFile(String),
+    /// The desired image does not have the camera's size.
+    #[error("desired image is {got_width}x{got_height} but the camera is {width}x{height}")]
+    DesiredSize {
+        /// Image width.
+        got_width: u32,
+        /// Image height.
+        got_height: u32,
+        /// Camera width.
+        width: u32,
+        /// Camera height.
+        height: u32,
+    },
+    /// The initial pose is not finite.
+    #[error("initial pose is not finite")]
+    NonFinitePose,
+    /// Rendering failed.
+    #[error(transparent)]
+    Render(#[from] splat::SplatError),
+    /// The PGM stage failed.
+    #[error(transparent)]
+    Pgm(#[from] pgm::PgmError),
+    /// The brightness stage failed.
+    #[error(transparent)]
+    Brightness(#[from] brightness::BrightnessError),
+}

@@ -1,0 +1,83 @@
+//! What a run returns.
+
+use serde::{Deserialize, Serialize};
+use ucm::Isometry3;
+
+/// Why a run diverged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Divergence {
+    /// Too few valid pixels see a point (the camera left the scene or is inside a wall).
+    NoValidPixels,
+    /// The cost grew beyond the configured multiple of its initial value.
+    CostExploded,
+    /// The camera left the cloud's (enlarged) bounding box.
+    LeftBounds,
+    /// A NaN or infinite value appeared (cost, pose, λ).
+    NotFinite,
+    /// The linear system had no usable direction.
+    SingularSystem,
+}
+
+/// Why a run stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// The last stage converged (the update fell below the thresholds).
+    Converged,
+    /// The iteration budget ran out.
+    IterationBudget,
+    /// The run diverged.
+    Diverged(Divergence),
+}
+
+impl StopReason {
+    /// Short name for tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            StopReason::Converged => "converged",
+            StopReason::IterationBudget => "budget",
+            StopReason::Diverged(Divergence::NoValidPixels) => "diverged:no_valid_pixels",
+            StopReason::Diverged(Divergence::CostExploded) => "diverged:cost_exploded",
+            StopReason::Diverged(Divergence::LeftBounds) => "diverged:left_bounds",
+            StopReason::Diverged(Divergence::NotFinite) => "diverged:not_finite",
+            StopReason::Diverged(Divergence::SingularSystem) => "diverged:singular",
+        }
+    }
+}
+
+/// One iteration, for plots and debugging.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IterationRecord {
+    /// Stage (1 or 2; PoVS has one stage).
+    pub stage: u8,
+    /// `world_from_camera` before the update, as the paper's `(t, θw)`.
+    pub pose: [f64; 6],
+    /// Extent λ used at this iteration (0 for PoVS).
+    pub lambda: f32,
+    /// Mean squared residual.
+    pub cost: f64,
+    /// Translation of the update, metres.
+    pub step_translation_m: f64,
+    /// Rotation of the update, radians.
+    pub step_rotation_rad: f64,
+    /// Wall time of the iteration (render + feature + solve), seconds.
+    pub time_s: f64,
+}
+
+/// The result of a run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Outcome {
+    /// Final `world_from_camera`.
+    pub world_from_camera: Isometry3,
+    /// Final λ (0 for PoVS).
+    pub lambda: f32,
+    /// Final mean squared residual.
+    pub cost: f64,
+    /// Why it stopped.
+    pub stop: StopReason,
+    /// Iterations of step 1 and step 2 (PoVS: all in the first).
+    pub iterations: [usize; 2],
+    /// Per-iteration history (empty if not kept).
+    pub history: Vec<IterationRecord>,
+}

@@ -1,0 +1,34 @@
+use vvs::{JacobianKind, Robust, VvsConfig, VvsError};
+
+#[test]
+fn config_round_trips_through_toml_and_rejects_bad_values() {
+    let config = VvsConfig {
+        jacobian: JacobianKind::Paper {
+            edge_margin: Some(3.0),
+        },
+        robust: Some(Robust::Tukey { c: 4.685 }),
+        levenberg_marquardt: Some(0.01),
+        ..VvsConfig::default()
+    };
+    let text = config.to_toml_string().unwrap();
+    assert_eq!(VvsConfig::from_toml_str(&text).unwrap(), config);
+    // Missing fields take the paper's defaults.
+    let partial = VvsConfig::from_toml_str("gain = 0.3\n").unwrap();
+    assert_eq!(partial.gain, 0.3);
+    assert_eq!(partial.max_iterations, 250);
+    for (text, field) in [
+        ("gain = 2.0", "gain"),
+        ("lambda_star_step1 = 100.0", "lambda_star_step1"),
+        ("step1_max_iterations = 300", "step1_max_iterations"),
+        ("pgm_stride = 0", "pgm_stride"),
+    ] {
+        match VvsConfig::from_toml_str(text) {
+            Err(VvsError::Config { name, .. }) => assert_eq!(name, field),
+            other => panic!("{text}: {other:?}"),
+        }
+    }
+    assert!(matches!(
+        VvsConfig::from_toml_str("gian = 0.2"),
+        Err(VvsError::ConfigFile(_))
+    ));
+}
