@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 
 pub mod fixtures;
+pub mod reproduce;
 
 /// The workspace root (the parent of `xtask/`).
 pub fn project_root() -> PathBuf {
@@ -21,6 +22,12 @@ const HELP: &str = "\
 cargo xtask <command>
 
 commands:
+  reproduce-fig3 [--quick] [--extras]
+                       the convergence-domain protocol of the paper (§3, Fig. 3) on the
+                       synthetic city: fixtures/protocol-fig3.toml (--quick: the CI subset
+                       fixtures/protocol-fig3-quick.toml; --extras: also the methods beyond
+                       the paper). Results (CSV, summary.md, cdf.png/svg) in results/fig3*/,
+                       checked for consistency.
   fixtures [--check]   write fixtures/*.toml from their definition in xtask/src/fixtures.rs
                        (--check: fail if the committed files differ)
   help                 this text
@@ -55,6 +62,18 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
                 }
             }
             Ok(())
+        }
+        "reproduce-fig3" => {
+            let mut quick = false;
+            let mut extras = false;
+            for flag in rest {
+                match flag.as_str() {
+                    "--quick" => quick = true,
+                    "--extras" => extras = true,
+                    other => bail!("unknown flag `{other}`\n\n{HELP}"),
+                }
+            }
+            reproduce::fig3(quick, extras)
         }
         "help" | "--help" | "-h" => {
             print!("{HELP}");

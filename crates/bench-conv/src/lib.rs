@@ -8,8 +8,16 @@
 //!   (--pose tx,ty,tz,θwx,θwy,θwz | --looking-down x,y,z,heading_deg) --out IMG.png`:
 //!   render a cloud at a pose, and report what was drawn.
 //!
-//! The convergence protocol of the paper (§3) lands here with issue #6.
+//! * `bench-conv run PROTOCOL.toml --out DIR [--shard i/n] [--extras]`: run a
+//!   convergence protocol (format in [`protocol`]) and write `runs.csv`, `summary.md`
+//!   and the cumulative distribution `cdf.png` / `cdf.svg` under `DIR`;
+//! * `bench-conv merge SHARD.csv... --out DIR`: merge shards run on several machines
+//!   (the merge of all shards equals a single run).
 #![deny(missing_docs)]
+
+pub mod protocol;
+pub mod report;
+pub mod run;
 
 use anyhow::{Context, bail};
 use glam::DVec3;
@@ -47,4 +55,18 @@ pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Res
         }
         _ => bail!("give exactly one of --pose and --looking-down"),
     }
+}
+
+/// Register the plots' font (Hack, embedded by `epaint_default_fonts`) once, so that
+/// plotting needs no system font.
+pub fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // Registration only fails on a malformed font, which the embedded one is not.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            epaint_default_fonts::HACK_REGULAR,
+        );
+    });
 }

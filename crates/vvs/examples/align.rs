@@ -1,6 +1,6 @@
 //! Align one initial pose to a desired one on the synthetic city and print the run:
-//! `cargo run --release -p vvs --example align -- <method> <dx> <dy> <dz> <yaw_deg> [jacobian]`
-//! (offsets in the desired camera's frame; jacobian: convolved | paper).
+//! `cargo run --release -p vvs --example align -- <method> <dx> <dy> <dz> <yaw_deg> [jacobian] [roll_deg] [pitch_deg]`
+//! (offsets in the desired camera's frame, the paper's (t, θw); jacobian: convolved | paper).
 
 use glam::DVec3;
 use splat::city::{City, CityParams, camera_looking_down};

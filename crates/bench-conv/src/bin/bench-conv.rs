@@ -17,6 +17,32 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a convergence protocol (format: crates/bench-conv/src/protocol.rs).
+    Run {
+        /// Protocol file.
+        protocol: PathBuf,
+        /// Results folder (created).
+        #[arg(long)]
+        out: PathBuf,
+        /// Run shard i of n only (i/n): run ids congruent to i modulo n.
+        #[arg(long)]
+        shard: Option<String>,
+        /// Also run the protocol's extra methods ([[variant]]: LM, robust weighting…).
+        #[arg(long)]
+        extras: bool,
+    },
+    /// Merge the runs.csv of shards into one results folder (CSV, summary, plots).
+    Merge {
+        /// The shards' CSV files.
+        #[arg(required = true)]
+        csv: Vec<PathBuf>,
+        /// Results folder (created).
+        #[arg(long)]
+        out: PathBuf,
+        /// Success threshold, metres.
+        #[arg(long, default_value_t = 0.02)]
+        threshold_m: f64,
+    },
     /// Generate the synthetic city and write it as LAS (or LAZ by the extension).
     City {
         /// Output file (.las or .laz).
@@ -58,8 +84,70 @@ enum Command {
     },
 }
 
+fn write_results(
+    out: &std::path::Path,
+    title: &str,
+    records: &[bench_conv::report::RunRecord],
+    threshold_m: f64,
+    wall_time_s: Option<f64>,
+) -> anyhow::Result<()> {
+    use bench_conv::report;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    report::write_csv(&out.join("runs.csv"), records)?;
+    let summary = report::summary_markdown(title, records, threshold_m, wall_time_s);
+    std::fs::write(out.join("summary.md"), &summary)?;
+    report::plot_cdf(
+        records,
+        threshold_m,
+        &out.join("cdf.png"),
+        &out.join("cdf.svg"),
+    )?;
+    println!("{summary}");
+    println!("results in {}", out.display());
+    Ok(())
+}
+
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
+        Command::Run {
+            protocol,
+            out,
+            shard,
+            extras,
+        } => {
+            let started = Instant::now();
+            let protocol_path = protocol;
+            let protocol = bench_conv::protocol::Protocol::load(&protocol_path)?;
+            let shard = shard
+                .as_deref()
+                .map(bench_conv::run::Shard::parse)
+                .transpose()?;
+            let (cloud, scene) = bench_conv::run::load_scene(&protocol)?;
+            let records = bench_conv::run::run_protocol(&protocol, &cloud, &scene, extras, shard)?;
+            let title = match shard {
+                Some(s) => format!("{} (shard {}/{})", protocol.name, s.index, s.count),
+                None => protocol.name.clone(),
+            };
+            write_results(
+                &out,
+                &title,
+                &records,
+                protocol.success_threshold_m,
+                Some(started.elapsed().as_secs_f64()),
+            )?;
+        }
+        Command::Merge {
+            csv,
+            out,
+            threshold_m,
+        } => {
+            let parts = csv
+                .iter()
+                .map(|p| bench_conv::report::read_csv(p))
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let records = bench_conv::report::merge(parts)?;
+            write_results(&out, "merged", &records, threshold_m, None)?;
+        }
         Command::City {
             out,
             seed,

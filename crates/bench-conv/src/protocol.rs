@@ -1,0 +1,345 @@
+//! The protocol file: which cloud, camera, desired poses, offsets, methods and budgets.
+//!
+//! ```toml
+//! name = "fig3"
+//! camera = "omni-320x240.toml"        # camera TOML, relative to this file
+//! success_threshold_m = 0.02          # a run succeeds below this final position error
+//! methods = ["povs", "rule0", "rule1", "rule2"]
+//! jacobians = ["convolved", "paper"]  # every PGM method runs once per Jacobian; PoVS once
+//! # initial_indices = [0, 63]         # optional subset of the 2^6 sign combinations
+//!
+//! [scene]
+//! kind = "city"                       # the synthetic city: seed, spacing_m
+//! seed = 1
+//! spacing_m = 0.05
+//! # kind = "las", path = "cloud.laz"  # any LAS/LAZ file, relative to this file
+//!
+//! [offsets]                           # every sign combination, in the desired camera's frame
+//! translation_m = [8.0, 2.0, 1.5]     # tX (along the street), tY (across), tZ (vertical)
+//! rotation_deg = [10.0, 10.0, 15.0]   # θwX, θwY (tilts), θwZ (yaw)
+//!
+//! [[desired]]                         # world_from_camera of each desired camera, either
+//! looking_down = [-40.0, 0.5, 3.0, 0.0]  # x, y, z (m) and heading (deg) of a camera looking down
+//! # pose = [tx, ty, tz, θwx, θwy, θwz]  # or the paper's pose vector (m, rad)
+//!
+//! [vvs]                               # optional: any vvs::VvsConfig field (defaults: the paper's)
+//! gain = 0.2
+//!
+//! [[variant]]                         # optional extra methods (run with --extras)
+//! name = "rule2-lm"
+//! method = "rule2"
+//! jacobian = "convolved"
+//! vvs = { levenberg_marquardt = 0.01 }
+//! ```
+//!
+//! Initial pose `i` (0–63) of a desired pose takes the sign `−` for component `k` of
+//! `(tX, tY, tZ, θwX, θwY, θwZ)` where bit `k` of `i` is set: `initial = desired ·
+//! (t, θw)`, i.e. the offsets are applied in the desired camera's frame.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use serde::Deserialize;
+use ucm::Isometry3;
+use vvs::{JacobianKind, Method, VvsConfig};
+
+/// A parsed protocol file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Protocol {
+    /// Name, used in result file names.
+    pub name: String,
+    /// Camera TOML path (relative to the protocol file).
+    pub camera: PathBuf,
+    /// Success threshold on the final position error, metres.
+    #[serde(default = "default_threshold")]
+    pub success_threshold_m: f64,
+    /// Methods to run.
+    pub methods: Vec<Method>,
+    /// PGM Jacobians to run every PGM method with.
+    pub jacobians: Vec<JacobianName>,
+    /// Optional subset of the 64 initial poses.
+    #[serde(default)]
+    pub initial_indices: Option<Vec<usize>>,
+    /// The cloud.
+    pub scene: Scene,
+    /// Offsets of the initial poses.
+    pub offsets: Offsets,
+    /// Desired poses.
+    pub desired: Vec<DesiredPose>,
+    /// Optimiser settings.
+    #[serde(default)]
+    pub vvs: toml::Table,
+    /// Extra methods (beyond the paper), run with `--extras`.
+    #[serde(default)]
+    pub variant: Vec<Variant>,
+    /// The folder of the protocol file (set when loading).
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+}
+
+fn default_threshold() -> f64 {
+    0.02
+}
+
+/// A Jacobian by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JacobianName {
+    /// [`JacobianKind::Convolved`].
+    Convolved,
+    /// [`JacobianKind::Paper`] without margin.
+    Paper,
+    /// [`JacobianKind::Paper`] dropping samples within 3λ of the mask's edge.
+    PaperMargin3,
+}
+
+impl JacobianName {
+    /// The optimiser's setting.
+    pub fn kind(self) -> JacobianKind {
+        match self {
+            JacobianName::Convolved => JacobianKind::Convolved,
+            JacobianName::Paper => JacobianKind::Paper { edge_margin: None },
+            JacobianName::PaperMargin3 => JacobianKind::Paper {
+                edge_margin: Some(3.0),
+            },
+        }
+    }
+}
+
+/// The cloud of a protocol.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Scene {
+    /// The synthetic city.
+    City {
+        /// Seed.
+        seed: u64,
+        /// Point spacing, metres.
+        #[serde(default = "default_spacing")]
+        spacing_m: f64,
+    },
+    /// A LAS/LAZ file.
+    Las {
+        /// Path, relative to the protocol file.
+        path: PathBuf,
+    },
+}
+
+fn default_spacing() -> f64 {
+    0.05
+}
+
+/// Offsets of the initial poses.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Offsets {
+    /// `|tX|, |tY|, |tZ|`, metres.
+    pub translation_m: [f64; 3],
+    /// `|θwX|, |θwY|, |θwZ|`, degrees.
+    pub rotation_deg: [f64; 3],
+}
+
+/// A desired pose.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DesiredPose {
+    /// `x, y, z` (m) and heading (deg) of a camera looking down.
+    #[serde(default)]
+    pub looking_down: Option<[f64; 4]>,
+    /// The paper's pose vector `(t, θw)` of `world_from_camera` (m, rad).
+    #[serde(default)]
+    pub pose: Option<[f64; 6]>,
+}
+
+/// An extra method.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Variant {
+    /// Name in the results.
+    pub name: String,
+    /// Method.
+    pub method: Method,
+    /// Jacobian (PGM methods).
+    #[serde(default = "default_jacobian")]
+    pub jacobian: JacobianName,
+    /// Settings overriding the protocol's `[vvs]`.
+    #[serde(default)]
+    pub vvs: toml::Table,
+}
+
+fn default_jacobian() -> JacobianName {
+    JacobianName::Convolved
+}
+
+/// One method configuration of a protocol: what a row of the summary is about.
+#[derive(Clone, Debug)]
+pub struct MethodConfig {
+    /// Name in the results (`rule2/convolved`, `povs`, a variant's name).
+    pub name: String,
+    /// The method.
+    pub method: Method,
+    /// The optimiser settings.
+    pub config: VvsConfig,
+}
+
+/// One run of a protocol.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RunSpec {
+    /// Global index of the run (stable: shards and merges use it).
+    pub id: usize,
+    /// Index of the desired pose.
+    pub desired: usize,
+    /// Index of the initial pose (0–63).
+    pub initial: usize,
+    /// Index of the method configuration.
+    pub method: usize,
+}
+
+impl Protocol {
+    /// Read and check a protocol file.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading protocol {}", path.display()))?;
+        let mut protocol: Protocol = toml::from_str(&text)
+            .with_context(|| format!("parsing protocol {}", path.display()))?;
+        protocol.base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        protocol.check()?;
+        Ok(protocol)
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        if self.methods.is_empty() {
+            bail!("the protocol names no method");
+        }
+        if self.desired.is_empty() {
+            bail!("the protocol has no desired pose");
+        }
+        if self.methods.iter().any(|m| *m != Method::Povs) && self.jacobians.is_empty() {
+            bail!("PGM methods need at least one Jacobian in `jacobians`");
+        }
+        if !(self.success_threshold_m > 0.0) {
+            bail!("success_threshold_m must be > 0");
+        }
+        if let Some(indices) = &self.initial_indices
+            && let Some(bad) = indices.iter().find(|&&i| i >= 64)
+        {
+            bail!("initial index {bad} is not in 0..64");
+        }
+        for (k, d) in self.desired.iter().enumerate() {
+            self.desired_pose(k)
+                .with_context(|| format!("desired pose {k}: {d:?}"))?;
+        }
+        self.method_configs(true)?;
+        Ok(())
+    }
+
+    /// A path of the protocol, resolved against its folder.
+    pub fn resolve(&self, path: &Path) -> PathBuf {
+        if path.is_relative() {
+            self.base_dir.join(path)
+        } else {
+            path.to_path_buf()
+        }
+    }
+
+    /// `world_from_camera` of desired pose `k`.
+    pub fn desired_pose(&self, k: usize) -> anyhow::Result<Isometry3> {
+        let d = &self.desired[k];
+        match (d.looking_down, d.pose) {
+            (Some([x, y, z, heading]), None) => Ok(splat::city::camera_looking_down(
+                glam::DVec3::new(x, y, z),
+                heading.to_radians(),
+            )),
+            (None, Some(r)) => Ok(Isometry3::from_pose_vector(r)?),
+            _ => bail!("give exactly one of `looking_down` and `pose`"),
+        }
+    }
+
+    /// The offset `(t, θw)` of initial pose `index` (bit k set: component k negative).
+    pub fn offset(&self, index: usize) -> [f64; 6] {
+        let t = self.offsets.translation_m;
+        let r = self.offsets.rotation_deg.map(f64::to_radians);
+        let mag = [t[0], t[1], t[2], r[0], r[1], r[2]];
+        std::array::from_fn(|k| if index >> k & 1 == 1 { -mag[k] } else { mag[k] })
+    }
+
+    /// `world_from_camera` of initial pose `index` of desired pose `k`.
+    pub fn initial_pose(&self, k: usize, index: usize) -> anyhow::Result<Isometry3> {
+        Ok(self.desired_pose(k)? * Isometry3::from_pose_vector(self.offset(index))?)
+    }
+
+    /// The method configurations, in order (paper methods, then variants if `extras`).
+    pub fn method_configs(&self, extras: bool) -> anyhow::Result<Vec<MethodConfig>> {
+        let base = merge_config(&VvsConfig::default(), &self.vvs).context("[vvs]")?;
+        let mut out = Vec::new();
+        for &method in &self.methods {
+            if method == Method::Povs {
+                out.push(MethodConfig {
+                    name: "povs".into(),
+                    method,
+                    config: base.clone(),
+                });
+            } else {
+                for &j in &self.jacobians {
+                    out.push(MethodConfig {
+                        name: format!("{}/{}", method.name(), j.kind().name()),
+                        method,
+                        config: VvsConfig {
+                            jacobian: j.kind(),
+                            ..base.clone()
+                        },
+                    });
+                }
+            }
+        }
+        if extras {
+            for v in &self.variant {
+                let mut config =
+                    merge_config(&base, &v.vvs).with_context(|| format!("variant {}", v.name))?;
+                config.jacobian = v.jacobian.kind();
+                out.push(MethodConfig {
+                    name: v.name.clone(),
+                    method: v.method,
+                    config,
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// The initial pose indices of the protocol.
+    pub fn initial_indices(&self) -> Vec<usize> {
+        self.initial_indices
+            .clone()
+            .unwrap_or_else(|| (0..64).collect())
+    }
+
+    /// Every run, in a stable order: desired, initial, method.
+    pub fn runs(&self, extras: bool) -> anyhow::Result<Vec<RunSpec>> {
+        let methods = self.method_configs(extras)?.len();
+        let mut runs = Vec::new();
+        for desired in 0..self.desired.len() {
+            for initial in self.initial_indices() {
+                for method in 0..methods {
+                    runs.push(RunSpec {
+                        id: runs.len(),
+                        desired,
+                        initial,
+                        method,
+                    });
+                }
+            }
+        }
+        Ok(runs)
+    }
+}
+
+/// `base` with the fields of `overrides` replaced, validated.
+fn merge_config(base: &VvsConfig, overrides: &toml::Table) -> anyhow::Result<VvsConfig> {
+    let mut table: toml::Table = toml::from_str(&base.to_toml_string()?)?;
+    for (k, v) in overrides {
+        table.insert(k.clone(), v.clone());
+    }
+    Ok(VvsConfig::from_toml_str(&toml::to_string(&table)?)?)
+}

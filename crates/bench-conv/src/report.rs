@@ -1,0 +1,343 @@
+//! Results: the CSV of every run, its merge, the Markdown summary and the
+//! cumulative-distribution plot of Fig. 3.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+
+/// One run's result (a CSV row).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunRecord {
+    /// Global run index in the protocol.
+    pub run_id: usize,
+    /// Cloud name.
+    pub scene: String,
+    /// Desired pose index.
+    pub desired: usize,
+    /// Initial pose index (0–63).
+    pub initial: usize,
+    /// Method configuration name.
+    pub method: String,
+    /// Final position error, metres.
+    pub final_position_error_m: f64,
+    /// Final rotation error, degrees.
+    pub final_rotation_error_deg: f64,
+    /// Iterations of step 1.
+    pub iterations_step1: usize,
+    /// Iterations of step 2.
+    pub iterations_step2: usize,
+    /// Why the run stopped.
+    pub stop: String,
+    /// Final λ.
+    pub lambda: f32,
+    /// Final cost.
+    pub cost: f64,
+    /// Wall time, seconds.
+    pub wall_time_s: f64,
+    /// Final position error below the threshold.
+    pub success: bool,
+}
+
+const HEADER: &str = "run_id,scene,desired,initial,method,final_position_error_m,final_rotation_error_deg,iterations_step1,iterations_step2,stop,lambda,cost,wall_time_s,success";
+
+/// Write records as CSV.
+pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
+    let mut text = String::from(HEADER);
+    text.push('\n');
+    for r in records {
+        writeln!(
+            text,
+            "{},{},{},{},{},{:.6e},{:.6e},{},{},{},{},{:.6e},{:.3},{}",
+            r.run_id,
+            r.scene,
+            r.desired,
+            r.initial,
+            r.method,
+            r.final_position_error_m,
+            r.final_rotation_error_deg,
+            r.iterations_step1,
+            r.iterations_step2,
+            r.stop,
+            r.lambda,
+            r.cost,
+            r.wall_time_s,
+            r.success
+        )?;
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Read a CSV written by [`write_csv`].
+pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    if lines.next() != Some(HEADER) {
+        bail!(
+            "{}: not a bench-conv runs CSV (unexpected header)",
+            path.display()
+        );
+    }
+    lines
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(n, line)| {
+            let f: Vec<&str> = line.split(',').collect();
+            if f.len() != 14 {
+                bail!(
+                    "{}:{}: {} fields, expected 14",
+                    path.display(),
+                    n + 2,
+                    f.len()
+                );
+            }
+            let ctx = || format!("{}:{}", path.display(), n + 2);
+            Ok(RunRecord {
+                run_id: f[0].parse().with_context(ctx)?,
+                scene: f[1].to_string(),
+                desired: f[2].parse().with_context(ctx)?,
+                initial: f[3].parse().with_context(ctx)?,
+                method: f[4].to_string(),
+                final_position_error_m: f[5].parse().with_context(ctx)?,
+                final_rotation_error_deg: f[6].parse().with_context(ctx)?,
+                iterations_step1: f[7].parse().with_context(ctx)?,
+                iterations_step2: f[8].parse().with_context(ctx)?,
+                stop: f[9].to_string(),
+                lambda: f[10].parse().with_context(ctx)?,
+                cost: f[11].parse().with_context(ctx)?,
+                wall_time_s: f[12].parse().with_context(ctx)?,
+                success: f[13].parse().with_context(ctx)?,
+            })
+        })
+        .collect()
+}
+
+/// Merge shards: concatenate, sort by run id, refuse duplicates.
+pub fn merge(parts: Vec<Vec<RunRecord>>) -> anyhow::Result<Vec<RunRecord>> {
+    let mut all: Vec<RunRecord> = parts.into_iter().flatten().collect();
+    all.sort_by_key(|r| r.run_id);
+    if let Some(w) = all.windows(2).find(|w| w[0].run_id == w[1].run_id) {
+        bail!("run {} appears twice: overlapping shards", w[0].run_id);
+    }
+    Ok(all)
+}
+
+/// The paper's success rates (§3.2), by method name prefix.
+pub fn paper_success_rate(method: &str) -> Option<f64> {
+    match method.split('/').next()? {
+        "rule2" => Some(97.0),
+        "rule1" => Some(78.0),
+        "rule0" => Some(70.0),
+        "povs" => Some(0.0),
+        _ => None,
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Per-method statistics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MethodSummary {
+    /// Method configuration name.
+    pub method: String,
+    /// Runs.
+    pub runs: usize,
+    /// Successful runs.
+    pub successes: usize,
+    /// Median final position error, metres.
+    pub median_position_error_m: f64,
+    /// Median final rotation error, degrees.
+    pub median_rotation_error_deg: f64,
+    /// Median total iterations.
+    pub median_iterations: f64,
+    /// Median wall time per run, seconds.
+    pub median_wall_time_s: f64,
+    /// Total wall time of the method's runs, seconds.
+    pub total_wall_time_s: f64,
+}
+
+/// Statistics of every method, in order of first appearance.
+pub fn summarize(records: &[RunRecord]) -> Vec<MethodSummary> {
+    let mut order: Vec<String> = Vec::new();
+    let mut groups: BTreeMap<String, Vec<&RunRecord>> = BTreeMap::new();
+    for r in records {
+        if !groups.contains_key(&r.method) {
+            order.push(r.method.clone());
+        }
+        groups.entry(r.method.clone()).or_default().push(r);
+    }
+    order
+        .into_iter()
+        .map(|m| {
+            let g = &groups[&m];
+            MethodSummary {
+                method: m.clone(),
+                runs: g.len(),
+                successes: g.iter().filter(|r| r.success).count(),
+                median_position_error_m: median(
+                    g.iter().map(|r| r.final_position_error_m).collect(),
+                ),
+                median_rotation_error_deg: median(
+                    g.iter().map(|r| r.final_rotation_error_deg).collect(),
+                ),
+                median_iterations: median(
+                    g.iter()
+                        .map(|r| (r.iterations_step1 + r.iterations_step2) as f64)
+                        .collect(),
+                ),
+                median_wall_time_s: median(g.iter().map(|r| r.wall_time_s).collect()),
+                total_wall_time_s: g.iter().map(|r| r.wall_time_s).sum(),
+            }
+        })
+        .collect()
+}
+
+/// The Markdown summary table, with the paper's figures beside ours.
+pub fn summary_markdown(
+    title: &str,
+    records: &[RunRecord],
+    threshold_m: f64,
+    wall_time_s: Option<f64>,
+) -> String {
+    let mut s = format!("# {title}\n\n");
+    let _ = writeln!(
+        s,
+        "Success: final position error < {:.0} cm. {} runs.{}\n",
+        threshold_m * 100.0,
+        records.len(),
+        wall_time_s.map_or(String::new(), |t| format!(
+            " Wall time {:.1} min.",
+            t / 60.0
+        ))
+    );
+    s.push_str("| method | runs | success | paper | median position error | median rotation error | median iterations | median time per run |\n");
+    s.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    for m in summarize(records) {
+        let paper =
+            paper_success_rate(&m.method).map_or("—".to_string(), |p| format!("{p:.0} %"));
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.1} % ({}) | {} | {:.4} m | {:.3}° | {:.0} | {:.1} s |",
+            m.method,
+            m.runs,
+            100.0 * m.successes as f64 / m.runs.max(1) as f64,
+            m.successes,
+            paper,
+            m.median_position_error_m,
+            m.median_rotation_error_deg,
+            m.median_iterations,
+            m.median_wall_time_s
+        );
+    }
+    s.push_str("\nThe paper's rates (§3.2) are for its own scans of four streets and its own camera; see the project's notes for why ours differ.\n");
+    s
+}
+
+/// Plot the cumulative distribution of the final position errors per method (log
+/// error axis, threshold marked), as PNG and SVG.
+pub fn plot_cdf(
+    records: &[RunRecord],
+    threshold_m: f64,
+    png: &Path,
+    svg: &Path,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    crate::register_font();
+    draw_cdf(
+        BitMapBackend::new(png, (900, 600)).into_drawing_area(),
+        records,
+        threshold_m,
+    )
+    .with_context(|| format!("plotting {}", png.display()))?;
+    draw_cdf(
+        SVGBackend::new(svg, (900, 600)).into_drawing_area(),
+        records,
+        threshold_m,
+    )
+    .with_context(|| format!("plotting {}", svg.display()))?;
+    Ok(())
+}
+
+fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    records: &[RunRecord],
+    threshold_m: f64,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
+    let summaries = summarize(records);
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Cumulative distribution of final position errors",
+            ("sans-serif", 20),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d((1e-4f64..100.0f64).log_scale(), 0.0f64..100.0)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("final position error (m)")
+        .y_desc("runs (%)")
+        .draw()
+        .map_err(err)?;
+    chart
+        .draw_series(LineSeries::new(
+            [(threshold_m, 0.0), (threshold_m, 100.0)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(err)?
+        .label(format!("{:.0} cm threshold", threshold_m * 100.0))
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    for (i, m) in summaries.iter().enumerate() {
+        let mut errors: Vec<f64> = records
+            .iter()
+            .filter(|r| r.method == m.method)
+            .map(|r| r.final_position_error_m.clamp(1e-4, 100.0))
+            .collect();
+        errors.sort_by(f64::total_cmp);
+        let n = errors.len() as f64;
+        let mut points = vec![(1e-4, 0.0)];
+        for (k, e) in errors.iter().enumerate() {
+            points.push((*e, 100.0 * k as f64 / n));
+            points.push((*e, 100.0 * (k + 1) as f64 / n));
+        }
+        points.push((100.0, 100.0));
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .map_err(err)?
+            .label(format!(
+                "{} ({:.0} %)",
+                m.method,
+                100.0 * m.successes as f64 / n.max(1.0)
+            ))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}

@@ -1,0 +1,205 @@
+use std::path::PathBuf;
+
+use bench_conv::protocol::Protocol;
+use bench_conv::report::{merge, read_csv, summarize, summary_markdown, write_csv};
+use bench_conv::run::{Shard, load_scene, run_protocol};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("bench-conv-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A tiny protocol (short budgets) written next to a copy of the fixture camera.
+fn tiny_protocol(dir: &std::path::Path) -> PathBuf {
+    std::fs::copy(
+        root().join("fixtures/omni-320x240.toml"),
+        dir.join("camera.toml"),
+    )
+    .unwrap();
+    let text = r#"
+name = "tiny"
+camera = "camera.toml"
+methods = ["povs", "rule2"]
+jacobians = ["convolved", "paper"]
+initial_indices = [0, 5, 63]
+
+[scene]
+kind = "city"
+seed = 1
+spacing_m = 0.1
+
+[offsets]
+translation_m = [0.3, 0.1, 0.1]
+rotation_deg = [1.0, 1.0, 2.0]
+
+[[desired]]
+looking_down = [-20.0, 0.5, 3.0, 0.0]
+
+[vvs]
+step1_max_iterations = 2
+max_iterations = 4
+
+[[variant]]
+name = "rule2/lm"
+method = "rule2"
+vvs = { levenberg_marquardt = 0.1 }
+"#;
+    let path = dir.join("tiny.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
+    for name in ["protocol-fig3.toml", "protocol-fig3-quick.toml"] {
+        let p = Protocol::load(&root().join("fixtures").join(name)).unwrap();
+        assert!(!p.runs(true).unwrap().is_empty());
+        for d in 0..p.desired.len() {
+            for i in p.initial_indices() {
+                let pose = p.initial_pose(d, i).unwrap();
+                let t = pose.translation;
+                // Inside a 7 m road of one of the two streets, at least 1 m above it.
+                let across = if t.x.abs() > 6.0 { t.y } else { t.x };
+                assert!(across.abs() < 3.5, "{name}: desired {d} initial {i} at {t}");
+                assert!(
+                    t.z >= 1.0 && t.z <= 5.0,
+                    "{name}: desired {d} initial {i} at {t}"
+                );
+                assert!(t.x.abs() < 60.0 && t.y.abs() < 60.0);
+            }
+        }
+    }
+    let full = Protocol::load(&root().join("fixtures/protocol-fig3.toml")).unwrap();
+    assert_eq!(full.desired.len(), 7);
+    assert_eq!(full.initial_indices().len(), 64);
+    // PoVS once, three rules × two Jacobians: 7 configurations, 448 runs each.
+    assert_eq!(full.method_configs(false).unwrap().len(), 7);
+    assert_eq!(full.runs(false).unwrap().len(), 7 * 448);
+    // Offsets: index 0 all positive, 63 all negative, in the desired camera's frame.
+    assert_eq!(full.offset(0)[0], 8.0);
+    assert_eq!(full.offset(63)[2], -1.5);
+    let d = full.desired_pose(0).unwrap();
+    let i = full.initial_pose(0, 1).unwrap();
+    assert!(
+        ((i.translation - d.translation).x + 8.0).abs() < 1e-9,
+        "tX is along the street (camera X = world X)"
+    );
+}
+
+#[test]
+fn shards_merge_to_the_single_run() {
+    let dir = temp("shards");
+    let protocol = Protocol::load(&tiny_protocol(&dir)).unwrap();
+    let (cloud, scene) = load_scene(&protocol).unwrap();
+    let all = run_protocol(&protocol, &cloud, &scene, true, None).unwrap();
+    assert_eq!(all.len(), 3 * 4); // povs, rule2 × 2 Jacobians, the variant
+    let parts: Vec<_> = (0..2)
+        .map(|i| {
+            run_protocol(
+                &protocol,
+                &cloud,
+                &scene,
+                true,
+                Some(Shard { index: i, count: 2 }),
+            )
+            .unwrap()
+        })
+        .collect();
+    // Through CSV files, as on a cluster.
+    let files: Vec<PathBuf> = parts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let f = dir.join(format!("shard{i}.csv"));
+            write_csv(&f, p).unwrap();
+            f
+        })
+        .collect();
+    let merged = merge(files.iter().map(|f| read_csv(f).unwrap()).collect()).unwrap();
+    assert_eq!(merged.len(), all.len());
+    for (a, b) in merged.iter().zip(&all) {
+        // Everything but the wall time is identical.
+        assert_eq!(
+            (a.run_id, &a.method, a.desired, a.initial),
+            (b.run_id, &b.method, b.desired, b.initial)
+        );
+        assert!(
+            (a.final_position_error_m - b.final_position_error_m).abs()
+                <= 1e-6 * b.final_position_error_m.abs().max(1e-12)
+        );
+        assert_eq!(
+            (a.iterations_step1, a.iterations_step2, &a.stop, a.success),
+            (b.iterations_step1, b.iterations_step2, &b.stop, b.success)
+        );
+    }
+    // Overlapping shards are refused.
+    assert!(merge(vec![parts[0].clone(), parts[0].clone()]).is_err());
+    let md = summary_markdown("tiny", &all, 0.02, None);
+    assert!(md.contains("| rule2/convolved |") && md.contains("97 %"));
+    assert_eq!(summarize(&all).len(), 4);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_protocols_are_clear_errors() {
+    let dir = temp("bad");
+    let good = std::fs::read_to_string(tiny_protocol(&dir)).unwrap();
+    for (broken, expected) in [
+        (
+            good.replace("methods = [\"povs\", \"rule2\"]", "methods = []"),
+            "no method",
+        ),
+        (
+            good.replace("initial_indices = [0, 5, 63]", "initial_indices = [64]"),
+            "not in 0..64",
+        ),
+        (
+            good.replace(
+                "looking_down = [-20.0, 0.5, 3.0, 0.0]",
+                "looking_down = [1.0]",
+            ),
+            "parsing protocol",
+        ),
+        (
+            good.replace("gain_unused", "x")
+                .replace("[vvs]", "[vvs]\ngian = 0.3"),
+            "gian",
+        ),
+        (
+            good.replace(
+                "kind = \"city\"\nseed = 1\nspacing_m = 0.1",
+                "kind = \"las\"\npath = \"missing.laz\"",
+            ),
+            "missing.laz",
+        ),
+    ] {
+        let path = dir.join("broken.toml");
+        std::fs::write(&path, &broken).unwrap();
+        let result = Protocol::load(&path).and_then(|p| load_scene(&p).map(|_| ()));
+        let message = format!("{:#}", result.expect_err(expected));
+        assert!(
+            message.contains(expected),
+            "expected `{expected}` in: {message}"
+        );
+    }
+    // A pose outside the cloud is refused before anything runs.
+    let far = good.replace(
+        "looking_down = [-20.0, 0.5, 3.0, 0.0]",
+        "looking_down = [-500.0, 0.5, 3.0, 0.0]",
+    );
+    let path = dir.join("far.toml");
+    std::fs::write(&path, far).unwrap();
+    let protocol = Protocol::load(&path).unwrap();
+    let (cloud, scene) = load_scene(&protocol).unwrap();
+    let message = format!(
+        "{:#}",
+        run_protocol(&protocol, &cloud, &scene, false, None).unwrap_err()
+    );
+    assert!(message.contains("outside the cloud"), "{message}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
