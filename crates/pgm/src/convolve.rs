@@ -69,20 +69,10 @@ pub fn columns(
     kernel: &[f32],
     out_rows: &[usize],
 ) {
-    let r = (kernel.len() - 1) / 2;
     for &y in out_rows {
-        let d = &mut dst[y * width..(y + 1) * width];
-        d.fill(0.0);
-        let k0 = r.saturating_sub(y);
-        let k1 = (kernel.len()).min(height + r - y);
-        for ki in k0..k1 {
-            let c = kernel[ki];
-            let yy = y + ki - r;
-            for (o, &i) in d.iter_mut().zip(&src[yy * width..(yy + 1) * width]) {
-                *o += c * i;
-            }
-        }
+        dst[y * width..(y + 1) * width].fill(0.0);
     }
+    add_columns(src, dst, width, height, kernel, out_rows);
 }
 
 /// Add the column correlation of `src` with `kernel` to the rows `out_rows` of `dst`.
