@@ -2,7 +2,11 @@
 //!
 //! `out[x] = Σ_{k=−r..r} K[k + r] · in[x + k]`, the sum restricted to `0 ≤ x + k < n`
 //! (exact zero padding: pixels outside the image contribute nothing). Written as
-//! `axpy` loops over whole rows so that the compiler vectorises them.
+//! `axpy` loops over whole rows so that the compiler vectorises them. Rows (and
+//! output rows of the column pass) are independent: they are spread over rayon's
+//! threads, and the result does not depend on the thread count.
+
+use rayon::prelude::*;
 
 /// Sampled 1-D kernels of a Gaussian of extent `λ` over offsets `k = −r..=r`
 /// (`k = u − u_g`, pixel minus sample).
@@ -22,39 +26,50 @@ pub struct Kernels {
 impl Kernels {
     /// Kernels for extent `lambda` truncated at `radius` pixels.
     pub fn new(lambda: f32, radius: usize) -> Self {
+        let mut k = Self::default();
+        k.set(lambda, radius);
+        k
+    }
+
+    /// Recompute in place (no allocation once the largest radius has been seen).
+    pub fn set(&mut self, lambda: f32, radius: usize) {
         let l = f64::from(lambda);
-        let mut k = Self {
-            radius,
-            ..Self::default()
-        };
+        self.radius = radius;
+        self.g.clear();
+        self.k2g.clear();
+        self.dg.clear();
         for i in 0..=2 * radius {
             let d = i as f64 - radius as f64;
             let g = (-d * d / (2.0 * l * l)).exp();
-            k.g.push(g as f32);
-            k.k2g.push((d * d * g) as f32);
-            k.dg.push((d / (l * l) * g) as f32);
+            self.g.push(g as f32);
+            self.k2g.push((d * d * g) as f32);
+            self.dg.push((d / (l * l) * g) as f32);
         }
-        k
     }
 }
 
 /// Correlate every row of a `width × height` image with `kernel` (radius
 /// `(kernel.len() − 1)/2`).
 pub fn rows(src: &[f32], dst: &mut [f32], width: usize, kernel: &[f32]) {
+    src.par_chunks_exact(width)
+        .zip(dst.par_chunks_exact_mut(width))
+        .with_min_len(16)
+        .for_each(|(s, d)| row(s, d, width, kernel));
+}
+
+fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32]) {
     let r = (kernel.len() - 1) / 2;
-    for (s, d) in src.chunks_exact(width).zip(dst.chunks_exact_mut(width)) {
-        d.fill(0.0);
-        for (ki, &c) in kernel.iter().enumerate() {
-            let k = ki as isize - r as isize;
-            let x0 = (-k).max(0) as usize;
-            let x1 = (width as isize - k).min(width as isize).max(0) as usize;
-            if x0 >= x1 {
-                continue;
-            }
-            let sx0 = (x0 as isize + k) as usize;
-            for (o, &i) in d[x0..x1].iter_mut().zip(&s[sx0..sx0 + (x1 - x0)]) {
-                *o += c * i;
-            }
+    d.fill(0.0);
+    for (ki, &c) in kernel.iter().enumerate() {
+        let k = ki as isize - r as isize;
+        let x0 = (-k).max(0) as usize;
+        let x1 = (width as isize - k).min(width as isize).max(0) as usize;
+        if x0 >= x1 {
+            continue;
+        }
+        let sx0 = (x0 as isize + k) as usize;
+        for (o, &i) in d[x0..x1].iter_mut().zip(&s[sx0..sx0 + (x1 - x0)]) {
+            *o += c * i;
         }
     }
 }
@@ -75,7 +90,8 @@ pub fn columns(
     add_columns(src, dst, width, height, kernel, out_rows);
 }
 
-/// Add the column correlation of `src` with `kernel` to the rows `out_rows` of `dst`.
+/// Add the column correlation of `src` with `kernel` to the rows `out_rows` of `dst`
+/// (`out_rows` increasing).
 pub fn add_columns(
     src: &[f32],
     dst: &mut [f32],
@@ -85,16 +101,19 @@ pub fn add_columns(
     out_rows: &[usize],
 ) {
     let r = (kernel.len() - 1) / 2;
-    for &y in out_rows {
-        let d = &mut dst[y * width..(y + 1) * width];
-        let k0 = r.saturating_sub(y);
-        let k1 = (kernel.len()).min(height + r - y);
-        for ki in k0..k1 {
-            let c = kernel[ki];
-            let yy = y + ki - r;
-            for (o, &i) in d.iter_mut().zip(&src[yy * width..(yy + 1) * width]) {
-                *o += c * i;
+    dst.par_chunks_exact_mut(width)
+        .enumerate()
+        .with_min_len(16)
+        .filter(|(y, _)| out_rows.binary_search(y).is_ok())
+        .for_each(|(y, d)| {
+            let k0 = r.saturating_sub(y);
+            let k1 = (kernel.len()).min(height + r - y);
+            for ki in k0..k1 {
+                let c = kernel[ki];
+                let yy = y + ki - r;
+                for (o, &i) in d.iter_mut().zip(&src[yy * width..(yy + 1) * width]) {
+                    *o += c * i;
+                }
             }
-        }
-    }
+        });
 }

@@ -67,6 +67,7 @@ pub struct Pgm {
     sample_rows: Vec<usize>,
     edge_distance_px: Vec<f32>,
     // Full-image planes.
+    kernels: Kernels,
     h_g: Vec<f32>,
     h_k2g: Vec<f32>,
     h_dg: Vec<f32>,
@@ -118,6 +119,7 @@ impl Pgm {
             samples,
             sample_rows,
             edge_distance_px,
+            kernels: Kernels::default(),
             h_g: vec![0.0; n],
             h_k2g: vec![0.0; n],
             h_dg: vec![0.0; n],
@@ -139,9 +141,13 @@ impl Pgm {
         }
     }
 
-    fn kernels(&self, lambda: f32) -> Kernels {
+    /// The kernels of `lambda`, recomputed in place (taken out of `self` so that the
+    /// buffers can be borrowed beside them; put back by the caller).
+    fn kernels(&mut self, lambda: f32) -> Kernels {
         let radius = (self.options.kernel_radius_lambdas * lambda).ceil() as usize;
-        Kernels::new(lambda, radius.max(1))
+        let mut k = std::mem::take(&mut self.kernels);
+        k.set(lambda, radius.max(1));
+        k
     }
 
     /// `G(I, λ)` at the samples only (for the desired image).
@@ -162,6 +168,7 @@ impl Pgm {
         for (v, &s) in self.values.iter_mut().zip(&self.samples) {
             *v = self.out[s as usize];
         }
+        self.kernels = k;
         Ok(&self.values)
     }
 
@@ -232,6 +239,7 @@ impl Pgm {
                 }
             }
         }
+        self.kernels = k;
         Ok(())
     }
 
