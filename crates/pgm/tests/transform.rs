@@ -209,20 +209,41 @@ fn normalization_centres_and_scales() {
 /// Rows are spread over threads: same bits with 1 and 2 threads.
 #[test]
 fn transform_is_deterministic_across_thread_counts() {
-    let camera = Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
+    let camera =
+        Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
     let frame = crate::common::render(&camera, &crate::common::street_pose());
-    let results: Vec<(Vec<f32>, Vec<f32>, Vec<[f32; 6]>)> = [1, 2]
+    type Outputs = (Vec<f32>, Vec<f32>, Vec<[f32; 6]>);
+    let results: Vec<Outputs> = [1, 2]
         .into_iter()
         .map(|threads| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
             pool.install(|| {
                 let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
                 pgm.compute(&frame, 7.0, PgmJacobian::Convolved).unwrap();
-                (pgm.values().to_vec(), pgm.j_lambda().to_vec(), pgm.interaction().to_vec())
+                (
+                    pgm.values().to_vec(),
+                    pgm.j_lambda().to_vec(),
+                    pgm.interaction().to_vec(),
+                )
             })
         })
         .collect();
-    assert!(results[0].0.iter().zip(&results[1].0).all(|(a, b)| a.to_bits() == b.to_bits()));
-    assert!(results[0].1.iter().zip(&results[1].1).all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert!(
+        results[0]
+            .0
+            .iter()
+            .zip(&results[1].0)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+    assert!(
+        results[0]
+            .1
+            .iter()
+            .zip(&results[1].1)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
     assert_eq!(results[0].2, results[1].2);
 }
