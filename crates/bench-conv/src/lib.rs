@@ -12,10 +12,13 @@
 //!   convergence protocol (format in [`protocol`]) and write `runs.csv`, `summary.md`
 //!   and the cumulative distribution `cdf.png` / `cdf.svg` under `DIR`;
 //! * `bench-conv merge SHARD.csv... --out DIR`: merge shards run on several machines
-//!   (the merge of all shards equals a single run).
+//!   (the merge of all shards equals a single run);
+//! * `bench-conv pgm-image --image IMG --mei-yaml CALIB --crop x,y,w,h --out DIR`: the
+//!   PGM of a real catadioptric image at several λ (the paper's Fig. 1).
 #![deny(missing_docs)]
 
 pub mod protocol;
+pub mod real_image;
 pub mod report;
 pub mod run;
 

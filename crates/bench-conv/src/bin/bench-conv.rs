@@ -43,6 +43,27 @@ enum Command {
         #[arg(long, default_value_t = 0.02)]
         threshold_m: f64,
     },
+    /// The PGM of a real catadioptric image at several λ (the paper's Fig. 1).
+    PgmImage {
+        /// The image (JPEG, PNG…).
+        #[arg(long)]
+        image: PathBuf,
+        /// Its Mei calibration (omniunwarp YAML).
+        #[arg(long)]
+        mei_yaml: PathBuf,
+        /// The calibrated crop x,y,width,height (pixels).
+        #[arg(long)]
+        crop: String,
+        /// Valid annulus around the principal point, inner,outer radii (pixels).
+        #[arg(long, default_value = "30,470")]
+        annulus: String,
+        /// Extents λ, pixels.
+        #[arg(long, default_value = "1,5,15,30")]
+        lambdas: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Generate the synthetic city and write it as LAS (or LAZ by the extension).
     City {
         /// Output file (.las or .laz).
@@ -135,6 +156,33 @@ fn main() -> anyhow::Result<()> {
                 protocol.success_threshold_m,
                 Some(started.elapsed().as_secs_f64()),
             )?;
+        }
+        Command::PgmImage {
+            image,
+            mei_yaml,
+            crop,
+            annulus,
+            lambdas,
+            out,
+        } => {
+            let [x, y, w, h] = bench_conv::parse_numbers::<4>(&crop)?.map(|v| v as u32);
+            let [inner, outer] = bench_conv::parse_numbers::<2>(&annulus)?;
+            let probe = ucm::Camera::load_mei_yaml(&mei_yaml, w, h, ucm::ValidRegion::Full)?;
+            let i = probe.intrinsics();
+            let region = ucm::ValidRegion::Annulus(ucm::Annulus {
+                center_px: [i.u0, i.v0],
+                inner_radius_px: inner,
+                outer_radius_px: outer,
+            });
+            let camera = probe.with_region(region)?;
+            let frame = bench_conv::real_image::load_grey_frame(&image, [x, y, w, h], &camera)?;
+            let lambdas: Vec<f32> = lambdas
+                .split(',')
+                .map(|s| s.trim().parse::<f32>().with_context(|| format!("λ `{s}`")))
+                .collect::<anyhow::Result<_>>()?;
+            for path in bench_conv::real_image::write_pgm_images(&frame, &camera, &lambdas, &out)? {
+                println!("wrote {}", path.display());
+            }
         }
         Command::Merge {
             csv,

@@ -1,0 +1,90 @@
+//! The PGM of the real catadioptric image of `../shared/data` (the paper's Fig. 1).
+
+use std::path::PathBuf;
+
+use bench_conv::real_image::{load_grey_frame, write_pgm_images};
+use pgm::{Pgm, PgmOptions};
+
+fn data_dir() -> Option<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir = std::env::var_os("PGM_DATA_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("../shared/data"));
+    if dir.is_dir() {
+        Some(dir)
+    } else if std::env::var_os("CI").is_some() {
+        panic!("PGM_DATA_DIR ({}) is not a folder in CI", dir.display());
+    } else {
+        eprintln!(
+            "skipped: no data folder at {} (set PGM_DATA_DIR)",
+            dir.display()
+        );
+        None
+    }
+}
+
+/// Mean absolute difference between horizontal neighbours, relative to the mean.
+fn roughness(values: &[f32], samples: &[u32], width: usize) -> f64 {
+    let mut map = std::collections::HashMap::new();
+    for (&k, &v) in samples.iter().zip(values) {
+        map.insert(k as usize, f64::from(v));
+    }
+    let (mut diff, mut n, mut sum) = (0.0, 0usize, 0.0);
+    for (&k, &v) in &map {
+        sum += v;
+        if k % width + 1 < width
+            && let Some(&r) = map.get(&(k + 1))
+        {
+            diff += (r - v).abs();
+            n += 1;
+        }
+    }
+    (diff / n as f64) / (sum / map.len() as f64)
+}
+
+#[test]
+fn pgm_of_the_real_catadioptric_image_smooths_with_lambda() {
+    let Some(data) = data_dir() else { return };
+    let calib = data.join("catadioptric/omniunwarp-mei.yaml");
+    let probe = ucm::Camera::load_mei_yaml(&calib, 1230, 1000, ucm::ValidRegion::Full).unwrap();
+    let i = *probe.intrinsics();
+    let camera = probe
+        .with_region(ucm::ValidRegion::Annulus(ucm::Annulus {
+            center_px: [i.u0, i.v0],
+            inner_radius_px: 30.0,
+            outer_radius_px: 470.0,
+        }))
+        .unwrap();
+    let frame = load_grey_frame(
+        &data.join("catadioptric/omniunwarp-example.jpg"),
+        [310, 80, 1230, 1000],
+        &camera,
+    )
+    .unwrap();
+    let hits = frame.counts().0;
+    assert!(hits > 600_000, "{hits}");
+    let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
+    let mut last = f64::INFINITY;
+    for lambda in [1.0f32, 5.0, 15.0] {
+        pgm.transform(&frame, lambda).unwrap();
+        let r = roughness(pgm.values(), pgm.samples(), 1230);
+        assert!(r < last, "λ {lambda}: roughness {r} not below {last}");
+        last = r;
+    }
+    let out = std::env::temp_dir().join(format!("bench-conv-fig1-{}", std::process::id()));
+    let files = write_pgm_images(&frame, &camera, &[1.0, 15.0], &out).unwrap();
+    assert_eq!(files.len(), 4); // input, two λ, the montage
+    for f in &files {
+        assert!(f.metadata().unwrap().len() > 1000, "{}", f.display());
+    }
+    // A crop that does not match the camera is an error.
+    assert!(
+        load_grey_frame(
+            &data.join("catadioptric/omniunwarp-example.jpg"),
+            [0, 0, 100, 100],
+            &camera
+        )
+        .is_err()
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+}
