@@ -56,7 +56,11 @@ vvs = { levenberg_marquardt = 0.1 }
 
 #[test]
 fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
-    for name in ["protocol-fig3.toml", "protocol-fig3-quick.toml"] {
+    for name in [
+        "protocol-fig3.toml",
+        "protocol-fig3-quick.toml",
+        "protocol-fig3-lambda30.toml",
+    ] {
         let p = Protocol::load(&root().join("fixtures").join(name)).unwrap();
         assert!(!p.runs(true).unwrap().is_empty());
         for d in 0..p.desired.len() {

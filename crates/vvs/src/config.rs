@@ -158,13 +158,16 @@ impl VvsConfig {
         if !(self.gain > 0.0 && self.gain <= 1.0) {
             return bad("gain", format!("must be in (0, 1], got {}", self.gain));
         }
+        // Rule0's starting extent (factor × λ*₁) is checked when Rule0 runs.
+        if !(self.rule0_lambda_factor > 0.0 && self.rule0_lambda_factor.is_finite()) {
+            return bad(
+                "rule0_lambda_factor",
+                format!("must be > 0, got {}", self.rule0_lambda_factor),
+            );
+        }
         for (name, l) in [
             ("lambda_star_step1", self.lambda_star_step1),
             ("lambda_star_step2", self.lambda_star_step2),
-            (
-                "rule0_lambda_factor × lambda_star_step1",
-                self.rule0_lambda_factor * self.lambda_star_step1,
-            ),
         ] {
             if !pgm::LAMBDA_RANGE.contains(&l) {
                 return bad(name, format!("{l} is outside [0.5, 40] px"));

@@ -155,6 +155,13 @@ impl<'a> Servo<'a> {
         if !initial.is_finite() {
             return Err(VvsError::NonFinitePose);
         }
+        let rule0_start = self.config.rule0_lambda_factor * self.config.lambda_star_step1;
+        if method == Method::Rule0 && !pgm::LAMBDA_RANGE.contains(&rule0_start) {
+            return Err(VvsError::Config {
+                name: "rule0_lambda_factor",
+                message: format!("Rule0 would start at λ = {rule0_start} px, outside [0.5, 40]"),
+            });
+        }
         let mut pose = initial;
         let mut lambda = 0.0f32;
         let mut cost = f64::NAN;
