@@ -1,6 +1,7 @@
 //! Align one initial pose to a desired one on the synthetic city and print the run:
-//! `cargo run --release -p vvs --example align -- <method> <dx> <dy> <dz> <yaw_deg> [jacobian] [roll_deg] [pitch_deg]`
-//! (offsets in the desired camera's frame, the paper's (t, θw); jacobian: convolved | paper).
+//! `cargo run --release -p vvs --example align -- <method> <dx> <dy> <dz> <yaw_deg> [jacobian] [roll_deg] [pitch_deg] [camera]`
+//! (offsets in the desired camera's frame, the paper's (t, θw); jacobian: convolved |
+//! paper; camera: a file of fixtures/, default omni-320x240.toml).
 
 use glam::DVec3;
 use splat::city::{City, CityParams, camera_looking_down};
@@ -22,7 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let city = City::generate(&CityParams::default())?;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let camera = ucm::Camera::load_toml(root.join("fixtures/omni-320x240.toml"))?;
+    let camera_name = args.get(8).map_or("omni-320x240.toml", String::as_str);
+    let camera = ucm::Camera::load_toml(root.join("fixtures").join(camera_name))?;
     let config = VvsConfig {
         jacobian,
         ..VvsConfig::default()
