@@ -36,9 +36,13 @@ pub struct PgmOptions {
     /// Kernel radius in units of λ (rounded up to whole pixels). Default 4: the
     /// truncated tail weighs `exp(−8) ≈ 3.4e−4` of the peak.
     pub kernel_radius_lambdas: f32,
-    /// Sample every `stride`-th pixel in both directions (1: every pixel). For a large
-    /// λ the mixture is smooth and a coarser grid loses little; the cost of the
-    /// vertical passes falls by the stride.
+    /// Sample every `stride`-th pixel in both directions (1: every pixel). The values
+    /// (and `J_λ`, `L_G`) at the kept samples are exactly those of the full grid (the
+    /// whole image still enters every sum; tested); what changes is the number of
+    /// residuals, `stride²` times fewer. For a large λ the mixture varies over about λ
+    /// pixels, so a stride well below λ keeps its information; the cost of the vertical
+    /// passes falls by the stride (at 320×240, λ = 15, stride 4: 10.6 ms instead of
+    /// 16.6 ms for G, J_λ and L_G on one thread).
     pub stride: u32,
     /// Centre and normalise the brightness (zero mean, unit norm over the valid
     /// pixels) before the transform, as the paper does for real images (§4).
