@@ -169,38 +169,29 @@ pub struct MethodSummary {
     pub total_wall_time_s: f64,
 }
 
-/// Statistics of every method, in order of first appearance.
+/// Statistics of every method, by method name (a stable order whatever the shard).
 pub fn summarize(records: &[RunRecord]) -> Vec<MethodSummary> {
-    let mut order: Vec<String> = Vec::new();
-    let mut groups: BTreeMap<String, Vec<&RunRecord>> = BTreeMap::new();
+    let mut groups: BTreeMap<&str, Vec<&RunRecord>> = BTreeMap::new();
     for r in records {
-        if !groups.contains_key(&r.method) {
-            order.push(r.method.clone());
-        }
-        groups.entry(r.method.clone()).or_default().push(r);
+        groups.entry(&r.method).or_default().push(r);
     }
-    order
+    groups
         .into_iter()
-        .map(|m| {
-            let g = &groups[&m];
-            MethodSummary {
-                method: m.clone(),
-                runs: g.len(),
-                successes: g.iter().filter(|r| r.success).count(),
-                median_position_error_m: median(
-                    g.iter().map(|r| r.final_position_error_m).collect(),
-                ),
-                median_rotation_error_deg: median(
-                    g.iter().map(|r| r.final_rotation_error_deg).collect(),
-                ),
-                median_iterations: median(
-                    g.iter()
-                        .map(|r| (r.iterations_step1 + r.iterations_step2) as f64)
-                        .collect(),
-                ),
-                median_wall_time_s: median(g.iter().map(|r| r.wall_time_s).collect()),
-                total_wall_time_s: g.iter().map(|r| r.wall_time_s).sum(),
-            }
+        .map(|(m, g)| MethodSummary {
+            method: m.to_string(),
+            runs: g.len(),
+            successes: g.iter().filter(|r| r.success).count(),
+            median_position_error_m: median(g.iter().map(|r| r.final_position_error_m).collect()),
+            median_rotation_error_deg: median(
+                g.iter().map(|r| r.final_rotation_error_deg).collect(),
+            ),
+            median_iterations: median(
+                g.iter()
+                    .map(|r| (r.iterations_step1 + r.iterations_step2) as f64)
+                    .collect(),
+            ),
+            median_wall_time_s: median(g.iter().map(|r| r.wall_time_s).collect()),
+            total_wall_time_s: g.iter().map(|r| r.wall_time_s).sum(),
         })
         .collect()
 }
