@@ -72,14 +72,15 @@ impl Brightness {
             });
         }
         let valid = self.grid.valid();
+        frame
+            .inverse_range(&mut self.inverse_range)
+            .expect("frame size checked above");
         for k in 0..self.image.len() {
-            let (i, r) = match frame.status[k] {
-                PixelStatus::Hit => (frame.intensity[k], 1.0 / frame.range_m[k]),
-                PixelStatus::Sky => (frame.intensity[k], 0.0),
-                PixelStatus::Masked => (0.0, 0.0),
-            };
-            self.image[k] = if valid[k] { i } else { 0.0 };
-            self.inverse_range[k] = if valid[k] { r } else { 0.0 };
+            let seen = valid[k] && frame.status[k] != PixelStatus::Masked;
+            self.image[k] = if seen { frame.intensity[k] } else { 0.0 };
+            if !valid[k] {
+                self.inverse_range[k] = 0.0;
+            }
         }
         self.scale = 1.0;
         if self.normalize {

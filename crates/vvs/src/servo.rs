@@ -5,7 +5,7 @@ use std::time::Instant;
 use brightness::{Brightness, normal_equations};
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
-use splat::{Frame, PixelStatus, PointCloud, RenderOptions, Renderer};
+use splat::{Frame, PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 
 use crate::solve::solve;
@@ -39,7 +39,6 @@ pub struct Servo<'a> {
     desired: Vec<f32>,
     residuals: Vec<f32>,
     weights: Vec<f32>,
-    rows6: Vec<[f32; 6]>,
     rows7: Vec<[f32; 7]>,
     scratch: Vec<f32>,
 }
@@ -78,7 +77,6 @@ impl<'a> Servo<'a> {
             desired: Vec::new(),
             residuals: Vec::new(),
             weights: Vec::new(),
-            rows6: Vec::new(),
             rows7: Vec::new(),
             scratch: Vec::new(),
         })
@@ -232,14 +230,10 @@ impl<'a> Servo<'a> {
         let mut cost = f64::NAN;
         for iteration in 0..budget {
             let started = Instant::now();
-            self.renderer
+            let stats = self
+                .renderer
                 .render(self.cloud, &pose.inverse(), &mut self.frame)?;
-            let hits = self
-                .frame
-                .status
-                .iter()
-                .filter(|s| **s == PixelStatus::Hit)
-                .count() as f64;
+            let hits = stats.pixels_hit as f64;
             if hits / valid_count < self.config.min_hit_fraction {
                 return Ok((
                     StopReason::Diverged(Divergence::NoValidPixels),
@@ -318,10 +312,8 @@ impl<'a> Servo<'a> {
                         Stage::Brightness => self.brightness.interaction(),
                         Stage::Pgm { .. } => self.pgm.interaction(),
                     };
-                    self.rows6.clear();
-                    self.rows6.extend_from_slice(rows);
                     let (jtj, jte) =
-                        normal_equations::<6>(&self.rows6, &self.residuals, Some(&self.weights));
+                        normal_equations::<6>(rows, &self.residuals, Some(&self.weights));
                     solve(&jtj, &jte, eta).map(|x| (x, 0.0))
                 }
             };
