@@ -83,6 +83,79 @@ impl Frame {
         Self::new(camera.width(), camera.height())
     }
 
+    /// The frame at `1/factor` of its resolution, for image pyramids (the size of
+    /// [`ucm::Camera::downsampled`]): each `factor × factor` block becomes one pixel
+    /// whose intensity and range are the means over the block's hits. The pixel is a
+    /// hit when at least half of the block's valid pixels are hits, masked when
+    /// `camera_coarse` masks it, and sky otherwise. `camera_coarse` must have the
+    /// coarse size ([`SplatError::FrameSize`] otherwise).
+    pub fn downsampled(
+        &self,
+        factor: u32,
+        camera_coarse: &ucm::Camera,
+    ) -> Result<Frame, SplatError> {
+        let (width, height) = (
+            self.width.checked_div(factor).unwrap_or(0),
+            self.height.checked_div(factor).unwrap_or(0),
+        );
+        if width != camera_coarse.width() || height != camera_coarse.height() {
+            return Err(SplatError::FrameSize {
+                frame_width: width,
+                frame_height: height,
+                width: camera_coarse.width(),
+                height: camera_coarse.height(),
+            });
+        }
+        let mut out = Frame::new(width, height);
+        let (w, k) = (self.width as usize, factor as usize);
+        let valid = camera_coarse.valid_pixels();
+        for y in 0..height as usize {
+            for x in 0..width as usize {
+                let index = y * width as usize + x;
+                if !valid[index] {
+                    out.status[index] = PixelStatus::Masked;
+                    out.intensity[index] = 0.0;
+                    out.range_m[index] = f32::NAN;
+                    continue;
+                }
+                let (mut hits, mut unmasked) = (0u32, 0u32);
+                let (mut intensity, mut range) = (0.0f32, 0.0f32);
+                for dy in 0..k {
+                    let row = (y * k + dy) * w + x * k;
+                    for i in row..row + k {
+                        match self.status[i] {
+                            PixelStatus::Hit => {
+                                hits += 1;
+                                unmasked += 1;
+                                intensity += self.intensity[i];
+                                range += self.range_m[i];
+                            }
+                            PixelStatus::Sky => unmasked += 1,
+                            PixelStatus::Masked => {}
+                        }
+                    }
+                }
+                if hits > 0 && 2 * hits >= unmasked {
+                    out.status[index] = PixelStatus::Hit;
+                    out.intensity[index] = intensity / hits as f32;
+                    out.range_m[index] = range / hits as f32;
+                } else {
+                    out.intensity[index] = self.sky_intensity(y * k, x * k, k);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The intensity of the first sky pixel of a block (the background), else 0.
+    fn sky_intensity(&self, y0: usize, x0: usize, k: usize) -> f32 {
+        let w = self.width as usize;
+        (0..k)
+            .flat_map(|dy| (0..k).map(move |dx| (y0 + dy) * w + x0 + dx))
+            .find(|&i| self.status[i] == PixelStatus::Sky)
+            .map_or(0.0, |i| self.intensity[i])
+    }
+
     /// Width, pixels.
     pub fn width(&self) -> u32 {
         self.width

@@ -364,3 +364,48 @@ fn renderer_rejects_bad_input() {
         Err(SplatError::AttributeLength { .. })
     ));
 }
+
+/// A frame downsampled by 2 averages the hits of each block, and follows the coarse
+/// camera's mask.
+#[test]
+fn downsampled_frame_averages_blocks() {
+    let camera = fixture("omni-320x240.toml");
+    let coarse = camera.downsampled(2).unwrap();
+    let city = default_city();
+    let pose = camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.0);
+    let mut frame = Frame::for_camera(&camera);
+    Renderer::new(camera.clone(), RenderOptions::default())
+        .unwrap()
+        .render(&city.cloud, &pose.inverse(), &mut frame)
+        .unwrap();
+    let small = frame.downsampled(2, &coarse).unwrap();
+    assert_eq!((small.width(), small.height()), (160, 120));
+    let mut checked = 0;
+    for y in 0..120usize {
+        for x in 0..160usize {
+            let i = y * 160 + x;
+            let block = [
+                2 * y * 320 + 2 * x,
+                2 * y * 320 + 2 * x + 1,
+                (2 * y + 1) * 320 + 2 * x,
+                (2 * y + 1) * 320 + 2 * x + 1,
+            ];
+            if !coarse.valid_pixels()[i] {
+                assert_eq!(small.status[i], PixelStatus::Masked);
+                continue;
+            }
+            if block.iter().all(|&j| frame.status[j] == PixelStatus::Hit) {
+                let mean = block.iter().map(|&j| frame.intensity[j]).sum::<f32>() / 4.0;
+                assert_eq!(small.status[i], PixelStatus::Hit);
+                assert!((small.intensity[i] - mean).abs() < 1e-6);
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 5000, "{checked} full blocks");
+    // The wrong coarse camera is an error.
+    assert!(matches!(
+        frame.downsampled(4, &coarse),
+        Err(SplatError::FrameSize { .. })
+    ));
+}

@@ -131,6 +131,49 @@ impl Camera {
         )
     }
 
+    /// The same camera (same field of view) at `1/factor` of the resolution, for image
+    /// pyramids: the image is `⌊width/factor⌋ × ⌊height/factor⌋`, focal lengths and radii
+    /// divide by `factor`, pixel centres map to the centres of the `factor × factor`
+    /// blocks they average, and a masked pixel is valid when every pixel of its block
+    /// is. `factor` 0 is [`UcmError::EmptyImage`], as is an image smaller than a block.
+    pub fn downsampled(&self, factor: u32) -> Result<Self, UcmError> {
+        let (width, height) = (
+            self.width.checked_div(factor).unwrap_or(0),
+            self.height.checked_div(factor).unwrap_or(0),
+        );
+        if width == 0 || height == 0 {
+            return Err(UcmError::EmptyImage { width, height });
+        }
+        let f = f64::from(factor);
+        let centre = |c: f64| (c + 0.5) / f - 0.5;
+        let mut intrinsics = self.intrinsics;
+        intrinsics.alpha_u /= f;
+        intrinsics.alpha_v /= f;
+        intrinsics.skew /= f;
+        intrinsics.u0 = centre(intrinsics.u0);
+        intrinsics.v0 = centre(intrinsics.v0);
+        let region = match &self.region {
+            ValidRegion::Full => ValidRegion::Full,
+            ValidRegion::Annulus(a) => ValidRegion::Annulus(crate::Annulus {
+                center_px: [centre(a.center_px[0]), centre(a.center_px[1])],
+                inner_radius_px: a.inner_radius_px / f,
+                outer_radius_px: a.outer_radius_px / f,
+            }),
+            ValidRegion::Mask(m) => {
+                let (w, k) = (self.width as usize, factor as usize);
+                let flags = m.flags();
+                let valid = (0..height as usize)
+                    .flat_map(|y| (0..width as usize).map(move |x| (x, y)))
+                    .map(|(x, y)| {
+                        (0..k).all(|dy| (0..k).all(|dx| flags[(y * k + dy) * w + x * k + dx]))
+                    })
+                    .collect();
+                ValidRegion::Mask(crate::Mask::new(width, height, valid)?)
+            }
+        };
+        Self::new(intrinsics, self.distortion, width, height, region)
+    }
+
     /// The model's parameters.
     pub fn intrinsics(&self) -> &Intrinsics {
         &self.intrinsics

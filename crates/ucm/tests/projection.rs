@@ -174,6 +174,47 @@ fn fixture_camera_geometry() {
     assert!(((a[0] + 0.5) * 2.0 - 0.5 - b[0]).abs() < 1e-9);
 }
 
+/// Downsampling inverts rescaling, maps pixel centres to block centres and keeps a
+/// masked pixel only where its whole block is valid.
+#[test]
+fn downsampled_camera_is_the_same_camera_at_lower_resolution() {
+    let camera = fixture_320();
+    let large = camera.rescaled(2).unwrap();
+    let back = large.downsampled(2).unwrap();
+    assert_eq!((back.width(), back.height()), (320, 240));
+    let (a, b) = (camera.intrinsics(), back.intrinsics());
+    for (x, y) in [
+        (a.alpha_u, b.alpha_u),
+        (a.u0, b.u0),
+        (a.v0, b.v0),
+        (a.xi, b.xi),
+    ] {
+        assert!((x - y).abs() < 1e-9, "{x} vs {y}");
+    }
+    let coarse = camera.downsampled(4).unwrap();
+    assert_eq!((coarse.width(), coarse.height()), (80, 60));
+    let p = [1.0f64, -2.0, 0.4];
+    let fine = camera.project(p).unwrap();
+    let small = coarse.project(p).unwrap();
+    for i in 0..2 {
+        assert!(((fine[i] + 0.5) / 4.0 - 0.5 - small[i]).abs() < 1e-9);
+    }
+    // An explicit mask: one invalid pixel invalidates its block only.
+    let mut flags = vec![true; 320 * 240];
+    flags[5 * 320 + 7] = false;
+    let masked = camera
+        .with_region(ValidRegion::Mask(ucm::Mask::new(320, 240, flags).unwrap()))
+        .unwrap();
+    let half = masked.downsampled(2).unwrap();
+    assert_eq!(half.valid_pixel_count(), 160 * 120 - 1);
+    assert!(!half.valid_pixels()[2 * 160 + 3]);
+    assert!(matches!(
+        camera.downsampled(0),
+        Err(ucm::UcmError::EmptyImage { .. })
+    ));
+    assert!(camera.downsampled(400).is_err());
+}
+
 /// The real Mei calibration: ξ ≈ 1.52, distortion and skew.
 #[test]
 fn mei_calibration_loads_and_projects_inside_its_crop() {

@@ -105,6 +105,13 @@ pub struct VvsConfig {
     pub converged_translation_m: f64,
     /// …and rotates it by less than this (radians), and changes λ by less than 1e-4 px.
     pub converged_rotation_rad: f64,
+    /// A stage has stalled (and ends) when the lowest cost of its last `stall_window`
+    /// iterations is not at least `stall_relative_decrease` below the lowest before
+    /// them: rendering noise keeps the update above the thresholds above once the
+    /// pose has settled (or is stuck). 0 turns the test off.
+    pub stall_window: usize,
+    /// Relative decrease of the cost the last `stall_window` iterations must achieve.
+    pub stall_relative_decrease: f64,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
     pub divergence_cost_factor: f64,
     /// Divergence: fewer than this fraction of the valid pixels see a point.
@@ -116,6 +123,15 @@ pub struct VvsConfig {
     pub levenberg_marquardt: Option<f64>,
     /// Beyond the paper (off by default): robust weighting of the residuals.
     pub robust: Option<Robust>,
+    /// Beyond the paper (1: off): coarse-to-fine image pyramid. With `n` levels, step 1
+    /// first runs at 1/2^(n−1) of the resolution with λ*₁ / 2^(n−1), then at each finer
+    /// level (λ is in pixels, so it scales with the image); the coarse stages share
+    /// step 1's budget (each at most `step1_max_iterations / stages`).
+    pub pyramid_levels: u32,
+    /// Beyond the paper (empty: off): a λ schedule, extra step-1 stages at full
+    /// resolution after λ*₁, each with its own desired extent λ* (decreasing, pixels),
+    /// λ starting at λ* and optimised, sharing step 1's budget like the pyramid's.
+    pub lambda_schedule: Vec<f32>,
     /// Centre and normalise the brightness of both images (§4, for real images).
     pub normalize: bool,
     /// PGM sample stride (1: every pixel).
@@ -138,11 +154,15 @@ impl Default for VvsConfig {
             jacobian: JacobianKind::Convolved,
             converged_translation_m: 2e-5,
             converged_rotation_rad: 2e-5,
+            stall_window: 10,
+            stall_relative_decrease: 0.01,
             divergence_cost_factor: 1e3,
             min_hit_fraction: 0.02,
             bounds_margin_m: 5.0,
             levenberg_marquardt: None,
             robust: None,
+            pyramid_levels: 1,
+            lambda_schedule: Vec::new(),
             normalize: false,
             pgm_stride: 1,
             lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
@@ -201,6 +221,40 @@ impl VvsConfig {
             && !(c > 0.0 && c.is_finite())
         {
             return bad("robust", format!("Tukey c must be > 0, got {c}"));
+        }
+        if !(0.0..1.0).contains(&self.stall_relative_decrease) {
+            return bad(
+                "stall_relative_decrease",
+                format!("must be in [0, 1), got {}", self.stall_relative_decrease),
+            );
+        }
+        if !(1..=4).contains(&self.pyramid_levels) {
+            return bad(
+                "pyramid_levels",
+                format!("must be in 1..=4, got {}", self.pyramid_levels),
+            );
+        }
+        let coarsest = self.lambda_star_step1 / (1u32 << (self.pyramid_levels - 1)) as f32;
+        if !pgm::LAMBDA_RANGE.contains(&coarsest) {
+            return bad(
+                "pyramid_levels",
+                format!("λ*₁ at the coarsest level would be {coarsest} px, outside [0.5, 40]"),
+            );
+        }
+        for &l in &self.lambda_schedule {
+            if !pgm::LAMBDA_RANGE.contains(&l) {
+                return bad("lambda_schedule", format!("{l} is outside [0.5, 40] px"));
+            }
+        }
+        let stages = self.pyramid_levels as usize + self.lambda_schedule.len();
+        if self.step1_max_iterations < stages {
+            return bad(
+                "step1_max_iterations",
+                format!(
+                    "{} iterations cannot cover {stages} step-1 stages",
+                    self.step1_max_iterations
+                ),
+            );
         }
         if self.pgm_stride == 0 {
             return bad("pgm_stride", "must be >= 1".into());

@@ -27,6 +27,9 @@ pub enum StopReason {
     Converged,
     /// The iteration budget ran out.
     IterationBudget,
+    /// The cost stopped decreasing (see `VvsConfig::stall_window`): settled at the
+    /// noise floor, or stuck.
+    Stalled,
     /// The run diverged.
     Diverged(Divergence),
 }
@@ -37,6 +40,7 @@ impl StopReason {
         match self {
             StopReason::Converged => "converged",
             StopReason::IterationBudget => "budget",
+            StopReason::Stalled => "stalled",
             StopReason::Diverged(Divergence::NoValidPixels) => "diverged:no_valid_pixels",
             StopReason::Diverged(Divergence::CostExploded) => "diverged:cost_exploded",
             StopReason::Diverged(Divergence::LeftBounds) => "diverged:left_bounds",
@@ -49,8 +53,10 @@ impl StopReason {
 /// One iteration, for plots and debugging.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IterationRecord {
-    /// Stage (1 or 2; PoVS has one stage).
+    /// Step (1 or 2; PoVS has one).
     pub stage: u8,
+    /// Pyramid level (0: full resolution).
+    pub level: u8,
     /// `world_from_camera` before the update, as the paper's `(t, θw)`.
     pub pose: [f64; 6],
     /// Extent λ used at this iteration (0 for PoVS).

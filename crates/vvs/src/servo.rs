@@ -24,6 +24,51 @@ enum Stage {
     },
 }
 
+/// A stage with its step (1 or 2), pyramid level and iteration cap.
+#[derive(Clone, Copy, Debug)]
+struct Planned {
+    stage: Stage,
+    step: u8,
+    level: usize,
+    /// Most iterations this stage may take; the step's last stage takes whatever the
+    /// step's budget has left.
+    cap: usize,
+    last_of_step: bool,
+}
+
+/// The buffers of one pyramid level (level 0: full resolution).
+#[derive(Debug)]
+struct Level {
+    camera: Camera,
+    renderer: Renderer,
+    frame: Frame,
+    pgm: Pgm,
+    brightness: Brightness,
+}
+
+impl Level {
+    fn new(camera: Camera, config: &VvsConfig) -> Result<Self, VvsError> {
+        let options = RenderOptions {
+            lod_spacing_px: config.lod_spacing_px,
+            ..RenderOptions::default()
+        };
+        Ok(Self {
+            renderer: Renderer::new(camera.clone(), options)?,
+            frame: Frame::for_camera(&camera),
+            pgm: Pgm::new(
+                &camera,
+                PgmOptions {
+                    stride: config.pgm_stride,
+                    normalize: config.normalize,
+                    ..PgmOptions::default()
+                },
+            )?,
+            brightness: Brightness::new(&camera).with_normalization(config.normalize),
+            camera,
+        })
+    }
+}
+
 /// The optimiser for one cloud and camera, owning every buffer (no allocation per
 /// iteration once warm).
 #[derive(Debug)]
@@ -31,12 +76,10 @@ pub struct Servo<'a> {
     cloud: &'a PointCloud,
     camera: Camera,
     config: VvsConfig,
-    renderer: Renderer,
-    frame: Frame,
-    pgm: Pgm,
-    brightness: Brightness,
+    levels: Vec<Level>,
     bounds: (DVec3, DVec3),
     desired: Vec<f32>,
+    costs: Vec<f64>,
     residuals: Vec<f32>,
     weights: Vec<f32>,
     rows7: Vec<[f32; 7]>,
@@ -51,30 +94,22 @@ impl<'a> Servo<'a> {
         config: VvsConfig,
     ) -> Result<Self, VvsError> {
         config.validate()?;
-        let options = RenderOptions {
-            lod_spacing_px: config.lod_spacing_px,
-            ..RenderOptions::default()
-        };
-        let renderer = Renderer::new(camera.clone(), options)?;
-        let pgm = Pgm::new(
-            camera,
-            PgmOptions {
-                stride: config.pgm_stride,
-                normalize: config.normalize,
-                ..PgmOptions::default()
-            },
-        )?;
-        let brightness = Brightness::new(camera).with_normalization(config.normalize);
+        let mut levels = vec![Level::new(camera.clone(), &config)?];
+        for k in 1..config.pyramid_levels {
+            let coarse = camera.downsampled(1 << k).map_err(|e| VvsError::Config {
+                name: "pyramid_levels",
+                message: format!("level {k}: {e}"),
+            })?;
+            levels.push(Level::new(coarse, &config)?);
+        }
         Ok(Self {
             cloud,
             camera: camera.clone(),
-            renderer,
-            frame: Frame::for_camera(camera),
-            pgm,
-            brightness,
+            levels,
             bounds: cloud.bounds(),
             config,
             desired: Vec::new(),
+            costs: Vec::new(),
             residuals: Vec::new(),
             weights: Vec::new(),
             rows7: Vec::new(),
@@ -95,42 +130,73 @@ impl<'a> Servo<'a> {
     /// Render the cloud at `world_from_camera` (e.g. a desired image).
     pub fn render(&mut self, world_from_camera: &Isometry3) -> Result<Frame, VvsError> {
         let mut frame = Frame::for_camera(&self.camera);
-        self.renderer
+        self.levels[0]
+            .renderer
             .render(self.cloud, &world_from_camera.inverse(), &mut frame)?;
         Ok(frame)
     }
 
-    fn stages(&self, method: Method) -> Vec<(Stage, usize)> {
+    /// The stages of a method: step 1 (coarse pyramid levels first, then the full
+    /// resolution at λ*₁, then the λ schedule), then step 2.
+    fn stages(&self, method: Method) -> Vec<Planned> {
         let c = &self.config;
-        let step1 = |lambda_start: f32| Stage::Pgm {
-            lambda_star: c.lambda_star_step1,
-            lambda_start,
-            optimise_lambda: true,
-        };
-        let step2 = |optimise_lambda: bool| Stage::Pgm {
-            lambda_star: c.lambda_star_step2,
-            lambda_start: c.lambda_star_step2,
-            optimise_lambda,
-        };
-        let rest = c.max_iterations - c.step1_max_iterations;
-        match method {
-            Method::Povs => vec![(Stage::Brightness, c.max_iterations)],
-            Method::Rule0 => vec![
-                (
-                    step1(c.rule0_lambda_factor * c.lambda_star_step1),
-                    c.step1_max_iterations,
-                ),
-                (step2(false), rest),
-            ],
-            Method::Rule1 => vec![
-                (step1(c.lambda_star_step1), c.step1_max_iterations),
-                (step2(false), rest),
-            ],
-            Method::Rule2 => vec![
-                (step1(c.lambda_star_step1), c.step1_max_iterations),
-                (step2(true), rest),
-            ],
+        if method == Method::Povs {
+            return vec![Planned {
+                stage: Stage::Brightness,
+                step: 1,
+                level: 0,
+                cap: c.max_iterations,
+                last_of_step: true,
+            }];
         }
+        let first_lambda_factor = if method == Method::Rule0 {
+            c.rule0_lambda_factor
+        } else {
+            1.0
+        };
+        // (λ*, level) of step 1's stages.
+        let mut step1: Vec<(f32, usize)> = (1..c.pyramid_levels as usize)
+            .rev()
+            .map(|k| (c.lambda_star_step1 / (1u32 << k) as f32, k))
+            .collect();
+        step1.push((c.lambda_star_step1, 0));
+        step1.extend(c.lambda_schedule.iter().map(|&l| (l, 0)));
+        let n = step1.len();
+        let mut planned: Vec<Planned> = step1
+            .into_iter()
+            .enumerate()
+            .map(|(i, (lambda_star, level))| Planned {
+                stage: Stage::Pgm {
+                    lambda_star,
+                    lambda_start: if i == 0 {
+                        first_lambda_factor * lambda_star
+                    } else {
+                        lambda_star
+                    },
+                    optimise_lambda: true,
+                },
+                step: 1,
+                level,
+                cap: if i + 1 == n {
+                    c.step1_max_iterations
+                } else {
+                    c.step1_max_iterations / n
+                },
+                last_of_step: i + 1 == n,
+            })
+            .collect();
+        planned.push(Planned {
+            stage: Stage::Pgm {
+                lambda_star: c.lambda_star_step2,
+                lambda_start: c.lambda_star_step2,
+                optimise_lambda: method == Method::Rule2,
+            },
+            step: 2,
+            level: 0,
+            cap: c.max_iterations - c.step1_max_iterations,
+            last_of_step: true,
+        });
+        planned
     }
 
     /// Align: estimate the pose at which the cloud looks like `desired`, from
@@ -167,16 +233,36 @@ impl<'a> Servo<'a> {
         let mut iterations = [0usize; 2];
         let mut stop = StopReason::IterationBudget;
         let stages = self.stages(method);
-        for (index, (stage, budget)) in stages.iter().enumerate() {
-            let (result, stage_lambda, stage_cost, count) = self.run_stage(
-                *stage,
-                index as u8 + 1,
-                *budget,
-                desired,
-                &mut pose,
-                &mut history,
-            )?;
-            iterations[index.min(1)] += count;
+        // The desired image at each pyramid level.
+        let mut coarse_desired = Vec::with_capacity(self.levels.len() - 1);
+        for level in &self.levels[1..] {
+            let factor = self.camera.width() / level.camera.width();
+            coarse_desired.push(desired.downsampled(factor, &level.camera)?);
+        }
+        let budgets = [
+            self.config.step1_max_iterations,
+            self.config.max_iterations - self.config.step1_max_iterations,
+        ];
+        let budgets = if method == Method::Povs {
+            [self.config.max_iterations, 0]
+        } else {
+            budgets
+        };
+        for planned in &stages {
+            let step = usize::from(planned.step - 1);
+            let left = budgets[step] - iterations[step];
+            let budget = if planned.last_of_step {
+                left
+            } else {
+                planned.cap.min(left)
+            };
+            let level_desired = match planned.level {
+                0 => desired,
+                k => &coarse_desired[k - 1],
+            };
+            let (result, stage_lambda, stage_cost, count) =
+                self.run_stage(*planned, budget, level_desired, &mut pose, &mut history)?;
+            iterations[step] += count;
             lambda = stage_lambda;
             cost = stage_cost;
             stop = result;
@@ -197,19 +283,31 @@ impl<'a> Servo<'a> {
     /// One stage: returns why it stopped, the final λ and cost, and its iteration count.
     fn run_stage(
         &mut self,
-        stage: Stage,
-        stage_number: u8,
+        planned: Planned,
         budget: usize,
         desired: &Frame,
         pose: &mut Isometry3,
         history: &mut Vec<IterationRecord>,
     ) -> Result<(StopReason, f32, f64, usize), VvsError> {
+        let Planned {
+            stage,
+            step: stage_number,
+            level,
+            ..
+        } = planned;
+        let Level {
+            camera,
+            renderer,
+            frame,
+            pgm,
+            brightness,
+        } = &mut self.levels[level];
         // The desired feature, fixed for the stage.
         let (mut lambda, optimise_lambda) = match stage {
             Stage::Brightness => {
-                self.brightness.compute(desired)?;
+                brightness.compute(desired)?;
                 self.desired.clear();
-                self.desired.extend_from_slice(self.brightness.values());
+                self.desired.extend_from_slice(brightness.values());
                 (0.0, false)
             }
             Stage::Pgm {
@@ -217,22 +315,21 @@ impl<'a> Servo<'a> {
                 lambda_start,
                 optimise_lambda,
             } => {
-                let g = self.pgm.transform(desired, lambda_star)?;
+                let g = pgm.transform(desired, lambda_star)?;
                 self.desired.clear();
                 self.desired.extend_from_slice(g);
                 (lambda_start, optimise_lambda)
             }
         };
-        let valid_count = self.camera.valid_pixel_count().max(1) as f64;
+        let valid_count = camera.valid_pixel_count().max(1) as f64;
         let (lo, hi) = self.bounds;
         let margin = DVec3::splat(self.config.bounds_margin_m);
         let mut initial_cost = None;
         let mut cost = f64::NAN;
+        self.costs.clear();
         for iteration in 0..budget {
             let started = Instant::now();
-            let stats = self
-                .renderer
-                .render(self.cloud, &pose.inverse(), &mut self.frame)?;
+            let stats = renderer.render(self.cloud, &pose.inverse(), frame)?;
             let hits = stats.pixels_hit as f64;
             if hits / valid_count < self.config.min_hit_fraction {
                 return Ok((
@@ -245,13 +342,12 @@ impl<'a> Servo<'a> {
             // Feature, residuals, rows.
             let (values, pixel_weights): (&[f32], Option<&[f32]>) = match stage {
                 Stage::Brightness => {
-                    self.brightness.compute(&self.frame)?;
-                    (self.brightness.values(), None)
+                    brightness.compute(frame)?;
+                    (brightness.values(), None)
                 }
                 Stage::Pgm { .. } => {
-                    self.pgm
-                        .compute(&self.frame, lambda, self.config.jacobian.to_pgm())?;
-                    (self.pgm.values(), Some(self.pgm.weights()))
+                    pgm.compute(frame, lambda, self.config.jacobian.to_pgm())?;
+                    (pgm.values(), Some(pgm.weights()))
                 }
             };
             let m = values.len();
@@ -291,16 +387,23 @@ impl<'a> Servo<'a> {
                     iteration,
                 ));
             }
+            self.costs.push(cost);
+            if stalled(
+                &self.costs,
+                self.config.stall_window,
+                self.config.stall_relative_decrease,
+            ) {
+                return Ok((StopReason::Stalled, lambda, cost, iteration));
+            }
             // The step: x = −μ J⁺ e.
             let eta = self.config.levenberg_marquardt;
             let step: Option<([f64; 6], f64)> = match stage {
                 Stage::Pgm { .. } if optimise_lambda => {
                     self.rows7.clear();
                     self.rows7.extend(
-                        self.pgm
-                            .interaction()
+                        pgm.interaction()
                             .iter()
-                            .zip(self.pgm.j_lambda())
+                            .zip(pgm.j_lambda())
                             .map(|(l, &j)| [l[0], l[1], l[2], l[3], l[4], l[5], j]),
                     );
                     let (jtj, jte) =
@@ -309,8 +412,8 @@ impl<'a> Servo<'a> {
                 }
                 _ => {
                     let rows = match stage {
-                        Stage::Brightness => self.brightness.interaction(),
-                        Stage::Pgm { .. } => self.pgm.interaction(),
+                        Stage::Brightness => brightness.interaction(),
+                        Stage::Pgm { .. } => pgm.interaction(),
                     };
                     let (jtj, jte) =
                         normal_equations::<6>(rows, &self.residuals, Some(&self.weights));
@@ -333,6 +436,7 @@ impl<'a> Servo<'a> {
             if self.config.keep_history {
                 history.push(IterationRecord {
                     stage: stage_number,
+                    level: level as u8,
                     pose: pose.to_pose_vector(),
                     lambda,
                     cost,
@@ -380,6 +484,18 @@ impl<'a> Servo<'a> {
         }
         Ok((StopReason::IterationBudget, lambda, cost, budget))
     }
+}
+
+/// Whether the lowest cost of the last `window` iterations is not at least
+/// `relative_decrease` below the lowest before them (`window` 0: never).
+fn stalled(costs: &[f64], window: usize, relative_decrease: f64) -> bool {
+    if window == 0 || costs.len() <= window {
+        return false;
+    }
+    let (before, recent) = costs.split_at(costs.len() - window);
+    let best_before = before.iter().copied().fold(f64::INFINITY, f64::min);
+    let best_recent = recent.iter().copied().fold(f64::INFINITY, f64::min);
+    best_recent > (1.0 - relative_decrease) * best_before
 }
 
 /// Tukey biweight: `w *= (1 − (e/(c σ))²)²` for `|e| < c σ`, else 0, with

@@ -8,6 +8,9 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         },
         robust: Some(Robust::Tukey { c: 4.685 }),
         levenberg_marquardt: Some(0.01),
+        pyramid_levels: 3,
+        lambda_schedule: vec![7.5, 3.0],
+        stall_window: 0,
         ..VvsConfig::default()
     };
     let text = config.to_toml_string().unwrap();
@@ -21,6 +24,18 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         ("lambda_star_step1 = 100.0", "lambda_star_step1"),
         ("step1_max_iterations = 300", "step1_max_iterations"),
         ("pgm_stride = 0", "pgm_stride"),
+        ("pyramid_levels = 0", "pyramid_levels"),
+        ("pyramid_levels = 6", "pyramid_levels"),
+        (
+            "lambda_star_step1 = 1.5\npyramid_levels = 3",
+            "pyramid_levels",
+        ),
+        ("lambda_schedule = [7.5, 0.1]", "lambda_schedule"),
+        ("stall_relative_decrease = 1.5", "stall_relative_decrease"),
+        (
+            "step1_max_iterations = 2\nlambda_schedule = [7.5, 3.0]",
+            "step1_max_iterations",
+        ),
     ] {
         match VvsConfig::from_toml_str(text) {
             Err(VvsError::Config { name, .. }) => assert_eq!(name, field),

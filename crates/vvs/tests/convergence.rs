@@ -46,6 +46,8 @@ fn rule2_converges_from_metres_away_where_povs_does_not() {
         dr.to_degrees()
     );
     assert!(dt < 0.02, "Rule2 final error {dt} m");
+    // The stall test ends step 1 once the pose has settled at the noise floor.
+    assert!(pgm.iterations[0] < 120, "{:?}", pgm.iterations);
     let povs = servo.run(Method::Povs, &desired, start).unwrap();
     let (dt, _) = povs.world_from_camera.distance_to(&desired_pose());
     eprintln!(
@@ -148,4 +150,55 @@ fn runs_are_deterministic_across_thread_counts() {
             .collect::<Vec<_>>()
     };
     assert_eq!(strip(&runs[0]), strip(&runs[1]));
+}
+
+/// The pyramid runs step 1 coarse to fine with λ*₁ scaled to each level, the schedule
+/// adds its extents after λ*₁, budgets are shared, and the run still converges.
+#[test]
+fn pyramid_and_lambda_schedule_run_their_stages_and_converge() {
+    let camera = fixture();
+    let config = VvsConfig {
+        pyramid_levels: 3,
+        lambda_schedule: vec![7.5, 3.0],
+        ..VvsConfig::default()
+    };
+    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    let start = offset([0.8, -0.3, 0.2, 0.0, 0.02, 0.1]);
+    let outcome = servo.run(Method::Rule2, &desired, start).unwrap();
+    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
+    eprintln!(
+        "pyramid + schedule: {:?} after {:?}: {dt:.5} m, {:.4}°",
+        outcome.stop,
+        outcome.iterations,
+        dr.to_degrees()
+    );
+    // Stage starts: (step, level, λ) where the level or the step changes, or λ jumps
+    // up to a new extent.
+    let h = &outcome.history;
+    assert_eq!((h[0].stage, h[0].level, h[0].lambda), (1, 2, 3.75));
+    let levels: Vec<u8> = h.iter().map(|r| r.level).collect();
+    assert!(levels.windows(2).all(|w| w[1] <= w[0]), "coarse to fine");
+    let first_at = |level: u8| h.iter().position(|r| r.level == level).unwrap();
+    assert_eq!(h[first_at(1)].lambda, 7.5);
+    assert_eq!(h[first_at(0)].lambda, 15.0);
+    let step1: Vec<f32> = h
+        .iter()
+        .filter(|r| r.stage == 1 && r.level == 0)
+        .map(|r| r.lambda)
+        .collect();
+    for extent in [7.5f32, 3.0] {
+        assert!(
+            step1.contains(&extent),
+            "the schedule's λ* = {extent} never started: {step1:?}"
+        );
+    }
+    assert!(outcome.iterations[0] <= 120);
+    // Coarse stages at most 120 / 5 iterations each.
+    assert!(levels.iter().filter(|&&l| l == 2).count() <= 24);
+    assert!(
+        dt < 1e-3 && dr.to_degrees() < 0.05,
+        "{dt} m, {}°",
+        dr.to_degrees()
+    );
 }
