@@ -28,6 +28,12 @@ commands:
                        fixtures/protocol-fig3-quick.toml; --extras: also the methods beyond
                        the paper). Results (CSV, summary.md, cdf.png/svg) in results/fig3*/,
                        checked for consistency.
+  reproduce-fig4 [--quick]
+                       tracking by successive alignments (§4, Fig. 4): a shaken sequence
+                       through the synthetic city tracked by PoT and PGMoT with 1 frame in
+                       N, fixtures/sequence-fig4.toml (--quick: fixtures/sequence-fig4-quick.toml).
+                       Results (frames.csv, summary.md, plots, overlays) in results/fig4*/,
+                       checked for consistency.
   fixtures [--check]   write fixtures/*.toml from their definition in xtask/src/fixtures.rs
                        (--check: fail if the committed files differ)
   help                 this text
@@ -74,6 +80,14 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
                 }
             }
             reproduce::fig3(quick, extras)
+        }
+        "reproduce-fig4" => {
+            let quick = match rest {
+                [] => false,
+                [flag] if flag == "--quick" => true,
+                _ => bail!("usage: cargo xtask reproduce-fig4 [--quick]"),
+            };
+            reproduce::fig4(quick)
         }
         "help" | "--help" | "-h" => {
             print!("{HELP}");

@@ -9,6 +9,107 @@ use bench_conv::report::{read_csv, summarize};
 
 use crate::project_root;
 
+/// `cargo run --release -p bench-conv -- <args>` from the project root.
+fn bench_conv(args: &[&std::ffi::OsStr]) -> anyhow::Result<()> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(project_root())
+        .args(["run", "--release", "--quiet", "-p", "bench-conv", "--"])
+        .args(args)
+        .status()
+        .context("running bench-conv")?;
+    ensure!(status.success(), "bench-conv failed: {status}");
+    Ok(())
+}
+
+/// Run the tracking experiment of Fig. 4 (or its quick subset) and check the results.
+pub fn fig4(quick: bool) -> anyhow::Result<()> {
+    let root = project_root();
+    let (sequence, out) = if quick {
+        (
+            root.join("fixtures/sequence-fig4-quick.toml"),
+            root.join("results/fig4-quick"),
+        )
+    } else {
+        (
+            root.join("fixtures/sequence-fig4.toml"),
+            root.join("results/fig4"),
+        )
+    };
+    bench_conv(&[
+        "track".as_ref(),
+        sequence.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ])?;
+    check_fig4(&sequence, &out)?;
+    println!(
+        "checked: {} is consistent with {}",
+        out.display(),
+        sequence.display()
+    );
+    Ok(())
+}
+
+/// The result files exist; every track aligned every frame of its step unless it was
+/// lost, and a lost track ends on a frame beyond the threshold or diverged.
+pub fn check_fig4(sequence: &std::path::Path, out: &std::path::Path) -> anyhow::Result<()> {
+    use bench_conv::tracking::{SequenceSpec, display_name, read_csv};
+    let spec = SequenceSpec::load(sequence)?;
+    let mut files = vec![
+        "frames.csv".to_string(),
+        "summary.md".into(),
+        "trajectories.png".into(),
+        "trajectories.svg".into(),
+        "errors.png".into(),
+        "errors.svg".into(),
+    ];
+    let records = read_csv(&out.join("frames.csv"))?;
+    let frames = spec.trajectory.frames;
+    let largest = spec.steps.iter().copied().max().unwrap_or(1);
+    for method in &spec.methods {
+        for &n in &spec.steps {
+            let track: Vec<_> = records
+                .iter()
+                .filter(|r| r.method == method.name() && r.step == n)
+                .collect();
+            let expected: Vec<usize> = (0..frames).step_by(n).collect();
+            let got: Vec<usize> = track.iter().map(|r| r.frame).collect();
+            ensure!(
+                expected.starts_with(&got) && !got.is_empty(),
+                "{} N = {n}: frames {got:?} are not a prefix of {expected:?}",
+                method.name()
+            );
+            if got.len() < expected.len() {
+                let last = track[track.len() - 1];
+                ensure!(
+                    last.position_error_m > spec.lost_threshold_m
+                        || last.stop.starts_with("diverged"),
+                    "{} N = {n} stops early at frame {} without being lost",
+                    method.name(),
+                    last.frame
+                );
+            }
+            if n == largest {
+                files.push(format!(
+                    "overlay-n{n}-{}-frame{}.png",
+                    display_name(method.name()),
+                    got[got.len() - 1]
+                ));
+            }
+        }
+    }
+    for name in files {
+        let path = out.join(&name);
+        ensure!(
+            path.metadata().map(|m| m.len() > 0).unwrap_or(false),
+            "{} is missing or empty",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 /// Run the Fig. 3 protocol (or its quick subset) and check the result files.
 pub fn fig3(quick: bool, extras: bool) -> anyhow::Result<()> {
     let root = project_root();
@@ -23,27 +124,16 @@ pub fn fig3(quick: bool, extras: bool) -> anyhow::Result<()> {
             root.join("results/fig3"),
         )
     };
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut command = Command::new(cargo);
-    command
-        .current_dir(&root)
-        .args([
-            "run",
-            "--release",
-            "--quiet",
-            "-p",
-            "bench-conv",
-            "--",
-            "run",
-        ])
-        .arg(&protocol_path)
-        .arg("--out")
-        .arg(&out);
+    let mut args = vec![
+        "run".as_ref(),
+        protocol_path.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ];
     if extras {
-        command.arg("--extras");
+        args.push("--extras".as_ref());
     }
-    let status = command.status().context("running bench-conv")?;
-    ensure!(status.success(), "bench-conv failed: {status}");
+    bench_conv(&args)?;
     check(&protocol_path, &out, quick, extras)?;
     println!(
         "checked: {} is consistent with {}",

@@ -2,3 +2,4 @@
 
 mod protocol;
 mod real_image;
+mod tracking;

@@ -272,6 +272,38 @@ fn city_is_deterministic_and_validated() {
     })
     .unwrap();
     assert_ne!(a.cloud.points(), c.cloud.points());
+    // Another sampling of the same surfaces: other points, (nearly) the same image;
+    // another seed: another city.
+    let resampled = City::generate(&CityParams {
+        sampling_seed: Some(7),
+        ..params.clone()
+    })
+    .unwrap();
+    assert_ne!(a.cloud.points(), resampled.cloud.points());
+    let camera = fixture("omni-320x240.toml");
+    let pose = camera_looking_down(DVec3::new(-8.0, 0.5, 3.0), 0.0);
+    let image = |city: &City| {
+        let mut frame = Frame::for_camera(&camera);
+        Renderer::new(camera.clone(), RenderOptions::default())
+            .unwrap()
+            .render(&city.cloud, &pose.inverse(), &mut frame)
+            .unwrap();
+        frame
+    };
+    let mean_abs_diff = |x: &Frame, y: &Frame| {
+        let pairs: Vec<(f32, f32)> = (0..x.intensity.len())
+            .filter(|&i| x.status[i] == PixelStatus::Hit && y.status[i] == PixelStatus::Hit)
+            .map(|i| (x.intensity[i], y.intensity[i]))
+            .collect();
+        pairs.iter().map(|(p, q)| (p - q).abs()).sum::<f32>() / pairs.len() as f32
+    };
+    let (base, same, other) = (image(&a), image(&resampled), image(&c));
+    let (d_same, d_other) = (mean_abs_diff(&base, &same), mean_abs_diff(&base, &other));
+    eprintln!("mean |ΔI|: resampled {d_same:.4}, other seed {d_other:.4}");
+    assert!(
+        d_same > 0.0 && d_same < 0.5 * d_other,
+        "{d_same} vs {d_other}"
+    );
     for bad in [
         CityParams {
             spacing_m: 0.0,

@@ -31,6 +31,15 @@ enum Command {
         #[arg(long)]
         extras: bool,
     },
+    /// Track a generated sequence by successive alignments (format:
+    /// crates/bench-conv/src/tracking.rs), the paper's §4.
+    Track {
+        /// Sequence file.
+        sequence: PathBuf,
+        /// Results folder (created).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Merge the runs.csv of shards into one results folder (CSV, summary, plots).
     Merge {
         /// The shards' CSV files.
@@ -156,6 +165,18 @@ fn main() -> anyhow::Result<()> {
                 protocol.success_threshold_m,
                 Some(started.elapsed().as_secs_f64()),
             )?;
+        }
+        Command::Track { sequence, out } => {
+            use bench_conv::tracking;
+            let spec = tracking::SequenceSpec::load(&sequence)?;
+            let camera = spec.load_camera()?;
+            let (cloud, acquired_cloud) = spec.load_clouds()?;
+            let (results, acquired) =
+                tracking::run_sequence(&spec, &camera, &cloud, acquired_cloud.as_ref())?;
+            let summary =
+                tracking::write_results(&spec, &camera, &cloud, &results, &acquired, &out)?;
+            println!("{summary}");
+            println!("results in {}", out.display());
         }
         Command::PgmImage {
             image,

@@ -53,6 +53,11 @@ pub struct CityParams {
     /// Length of each of the four arms from the centre of the crossing, metres.
     /// Default 60.
     pub arm_length_m: f64,
+    /// Seed of the point sampling alone (jittered positions, per-point grain): another
+    /// value samples the same surfaces anew (the layout, materials and textures come
+    /// from `seed`), e.g. for images that play the part of acquired ones. `None`: the
+    /// sampling follows `seed`.
+    pub sampling_seed: Option<u64>,
     /// Folder of optional photographic textures (`brick.png`, `gravel.png`,
     /// `grass.png`). Default none: procedural texture only.
     pub texture_dir: Option<PathBuf>,
@@ -66,6 +71,7 @@ impl Default for CityParams {
             street_width_m: 12.0,
             sidewalk_width_m: 2.5,
             arm_length_m: 60.0,
+            sampling_seed: None,
             texture_dir: None,
         }
     }
@@ -298,6 +304,10 @@ impl Generator {
             })
             .collect();
         let slab = [self.rng.uniform(0.3, 0.5), self.rng.uniform(0.3, 0.6)];
+        // Every layout draw of the shared stream is above: from here on it only samples.
+        if let Some(sampling) = p.sampling_seed {
+            self.rng = SplitMix64::new(crate::rng::mix64(sampling ^ 0x5A4D_504C_494E_4721));
+        }
         let gravel = self.textures.gravel.clone();
 
         let shade = |x: f64, y: f64, rng: &mut SplitMix64| -> (Rgb, f64) {

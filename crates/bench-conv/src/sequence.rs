@@ -1,0 +1,403 @@
+//! A synthetic image sequence for tracking (paper §4): a ground-truth trajectory with
+//! the shaking of a robot on uneven ground, and "acquired" images that differ from the
+//! renderer's the way real ones do.
+//!
+//! # Trajectory
+//! The robot moves in a straight line from `start` (the ground point under the camera,
+//! `[x, y, z]`, metres) along `heading_deg` over `length_m`, in `frames` frames at
+//! `fps`, its speed varying by `speed_variation` (relative, one slow sinusoid). The
+//! camera (the omnidirectional camera looking down, camera X forward) rides
+//! `camera_height_m` above the ground. On top of that ([`Shake`]):
+//!
+//! * **sway**: roll, pitch and yaw oscillations, each the sum of a sinusoid of amplitude
+//!   `sway_deg[k]` at `sway_hz[k]` and one of half that amplitude at 2.3 × the
+//!   frequency, with seeded phases (the robot rocking on its suspension);
+//! * **bumps**: `bumps_per_m` Gaussian bumps of the ground per metre of path, each of
+//!   a random height in `±bump_height_m` and of width `bump_length_m`; the camera
+//!   rises with them and pitches with their slope;
+//! * **kerb**: at `kerb_at_m` along the path the ground drops by `kerb_drop_m` (over
+//!   5 cm), followed by a damped pitch oscillation of `kerb_pitch_deg` at 2.5 Hz
+//!   (decay 4 s⁻¹);
+//! * **lateral wander**: a sideways sinusoid of `lateral_m` at 0.4 Hz.
+//!
+//! # Acquired images ([`Acquisition`])
+//! Rendered at the true pose from **another point sampling** of the same surfaces (the
+//! synthetic city regenerated with `sampling_seed`; a LAS scene is reused as is), then
+//! degraded in this order: vignetting `I · (1 − vignetting · (r / r_max)²)` (r from the
+//! valid region's centre), a gain `1 + gain_amplitude · sin(2π t / gain_period_s)` and
+//! an offset `offset_amplitude · cos(2π t / gain_period_s)` (auto-exposure drifting),
+//! a Gaussian blur of `blur_sigma_px`, Gaussian sensor noise of `noise_sigma`, and
+//! clamping to `[0, 1]`. Every random draw is seeded: the same file gives the same
+//! images.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use splat::rng::SplitMix64;
+use splat::{Frame, PixelStatus};
+use ucm::{Camera, Isometry3, ValidRegion};
+
+/// The trajectory and its shaking.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Trajectory {
+    /// Number of frames. Paper: 210.
+    pub frames: usize,
+    /// Frame rate, frames per second. Paper: 30.
+    pub fps: f64,
+    /// Ground point under the camera at the first frame, `[x, y, z]`, metres.
+    pub start: [f64; 3],
+    /// Direction of travel, degrees from the world X axis.
+    pub heading_deg: f64,
+    /// Path length, metres. Paper: about 4.35.
+    pub length_m: f64,
+    /// Height of the camera above the ground, metres.
+    pub camera_height_m: f64,
+    /// Relative speed variation (0: constant speed).
+    pub speed_variation: f64,
+    /// The shaking.
+    pub shake: Shake,
+    /// Seed of the shaking's phases and bumps.
+    pub seed: u64,
+}
+
+impl Default for Trajectory {
+    fn default() -> Self {
+        // The paper's robot: leaves the sidewalk of the X street and crosses it.
+        Self {
+            frames: 210,
+            fps: 30.0,
+            start: [-20.0, -4.75, splat::city::KERB_HEIGHT_M],
+            heading_deg: 90.0,
+            length_m: 4.35,
+            camera_height_m: 1.2,
+            speed_variation: 0.1,
+            shake: Shake::default(),
+            seed: 3,
+        }
+    }
+}
+
+/// The shaking of uneven ground (see the module documentation).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Shake {
+    /// Amplitudes of the roll, pitch and yaw sway, degrees.
+    pub sway_deg: [f64; 3],
+    /// Frequencies of the roll, pitch and yaw sway, hertz.
+    pub sway_hz: [f64; 3],
+    /// Bumps per metre of path.
+    pub bumps_per_m: f64,
+    /// Largest bump height, metres.
+    pub bump_height_m: f64,
+    /// Bump width (standard deviation of the Gaussian profile), metres.
+    pub bump_length_m: f64,
+    /// Distance along the path of a kerb step down, metres (none if absent).
+    pub kerb_at_m: Option<f64>,
+    /// Height of the kerb step, metres.
+    pub kerb_drop_m: f64,
+    /// Amplitude of the pitch oscillation after the kerb, degrees.
+    pub kerb_pitch_deg: f64,
+    /// Amplitude of the lateral wander, metres.
+    pub lateral_m: f64,
+}
+
+impl Default for Shake {
+    fn default() -> Self {
+        Self {
+            sway_deg: [2.0, 2.5, 1.5],
+            sway_hz: [1.3, 1.9, 0.6],
+            bumps_per_m: 2.0,
+            bump_height_m: 0.02,
+            bump_length_m: 0.08,
+            // The default start is 1.25 m from the road's edge (|y| = 3.5 m).
+            kerb_at_m: Some(1.25),
+            kerb_drop_m: splat::city::KERB_HEIGHT_M,
+            kerb_pitch_deg: 6.0,
+            lateral_m: 0.05,
+        }
+    }
+}
+
+/// How acquired images differ from rendered ones (see the module documentation).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Acquisition {
+    /// Point sampling of the generated city for acquired images (ignored for LAS).
+    pub sampling_seed: u64,
+    /// Vignetting strength at the valid region's outer radius (0: none).
+    pub vignetting: f64,
+    /// Amplitude of the gain drift (relative).
+    pub gain_amplitude: f64,
+    /// Amplitude of the offset drift (intensity units).
+    pub offset_amplitude: f64,
+    /// Period of the gain and offset drift, seconds.
+    pub gain_period_s: f64,
+    /// Standard deviation of the blur, pixels (0: none).
+    pub blur_sigma_px: f64,
+    /// Standard deviation of the sensor noise (intensity units).
+    pub noise_sigma: f64,
+    /// Seed of the sensor noise.
+    pub noise_seed: u64,
+}
+
+impl Default for Acquisition {
+    fn default() -> Self {
+        Self {
+            sampling_seed: 2,
+            vignetting: 0.3,
+            gain_amplitude: 0.15,
+            offset_amplitude: 0.03,
+            gain_period_s: 3.0,
+            blur_sigma_px: 0.7,
+            noise_sigma: 0.02,
+            noise_seed: 5,
+        }
+    }
+}
+
+impl Trajectory {
+    /// Check every field.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let finite = |v: f64| v.is_finite();
+        anyhow::ensure!(self.frames >= 1, "trajectory.frames must be >= 1");
+        anyhow::ensure!(
+            self.fps > 0.0 && finite(self.fps),
+            "trajectory.fps must be > 0"
+        );
+        anyhow::ensure!(
+            self.start.iter().all(|v| finite(*v))
+                && finite(self.heading_deg)
+                && self.length_m >= 0.0
+                && finite(self.length_m),
+            "trajectory.start, heading_deg and length_m must be finite (length >= 0)"
+        );
+        anyhow::ensure!(
+            self.camera_height_m > 0.0 && finite(self.camera_height_m),
+            "trajectory.camera_height_m must be > 0"
+        );
+        anyhow::ensure!(
+            (0.0..1.0).contains(&self.speed_variation),
+            "trajectory.speed_variation must be in [0, 1)"
+        );
+        let s = &self.shake;
+        anyhow::ensure!(
+            s.sway_deg
+                .iter()
+                .chain(&s.sway_hz)
+                .chain([
+                    &s.bumps_per_m,
+                    &s.bump_height_m,
+                    &s.kerb_drop_m,
+                    &s.kerb_pitch_deg,
+                    &s.lateral_m,
+                ])
+                .all(|v| *v >= 0.0 && finite(*v))
+                && s.bump_length_m > 0.0
+                && finite(s.bump_length_m),
+            "trajectory.shake values must be finite and >= 0 (bump_length_m > 0)"
+        );
+        Ok(())
+    }
+
+    /// Time of frame `k`, seconds.
+    pub fn time_s(&self, k: usize) -> f64 {
+        k as f64 / self.fps
+    }
+
+    /// The ground-truth `world_from_camera` of every frame.
+    pub fn poses(&self) -> Vec<Isometry3> {
+        let mut rng = SplitMix64::new(self.seed);
+        let s = &self.shake;
+        let phases: Vec<f64> = (0..7)
+            .map(|_| rng.uniform(0.0, std::f64::consts::TAU))
+            .collect();
+        let bump_count = (s.bumps_per_m * self.length_m).round() as usize;
+        let bumps: Vec<(f64, f64)> = (0..bump_count)
+            .map(|_| {
+                (
+                    rng.uniform(0.0, self.length_m),
+                    rng.uniform(-s.bump_height_m, s.bump_height_m),
+                )
+            })
+            .collect();
+        let duration = self.time_s(self.frames.saturating_sub(1)).max(1e-9);
+        // Distance travelled: mean speed × (t + variation term), normalised so the path
+        // ends at length_m.
+        let travelled = |t: f64| {
+            let w = std::f64::consts::TAU * 0.5;
+            t - self.speed_variation / w * ((w * t + phases[6]).cos() - phases[6].cos())
+        };
+        let total = travelled(duration);
+        let heading = self.heading_deg.to_radians();
+        let forward = DVec3::new(heading.cos(), heading.sin(), 0.0);
+        let left = DVec3::new(-heading.sin(), heading.cos(), 0.0);
+        let sigma = s.bump_length_m;
+        let bump_height = |d: f64| -> (f64, f64) {
+            bumps.iter().fold((0.0, 0.0), |(h, slope), &(c, a)| {
+                let g = a * (-(d - c).powi(2) / (2.0 * sigma * sigma)).exp();
+                (h + g, slope - g * (d - c) / (sigma * sigma))
+            })
+        };
+        (0..self.frames)
+            .map(|k| {
+                let t = self.time_s(k);
+                let d = if self.frames > 1 && total > 0.0 {
+                    self.length_m * travelled(t) / total
+                } else {
+                    0.0
+                };
+                let (mut ground, slope) = bump_height(d);
+                let mut kerb_pitch = 0.0;
+                if let Some(at) = s.kerb_at_m {
+                    // Smooth drop over 5 cm, then a damped pitch oscillation.
+                    let x = ((d - at) / 0.05).clamp(0.0, 1.0);
+                    ground -= s.kerb_drop_m * x * x * (3.0 - 2.0 * x);
+                    let speed = self.length_m / duration;
+                    let since = (d - at) / speed.max(1e-9);
+                    if since > 0.0 {
+                        kerb_pitch = s.kerb_pitch_deg.to_radians()
+                            * (-4.0 * since).exp()
+                            * (std::f64::consts::TAU * 2.5 * since).sin();
+                    }
+                }
+                let sway = |i: usize| {
+                    let w = std::f64::consts::TAU * s.sway_hz[i];
+                    s.sway_deg[i].to_radians()
+                        * ((w * t + phases[i]).sin() + 0.5 * (2.3 * w * t + phases[3 + i]).sin())
+                };
+                let lateral =
+                    s.lateral_m * (std::f64::consts::TAU * 0.4 * t + phases[2] + 1.0).sin();
+                let position = DVec3::from(self.start)
+                    + forward * d
+                    + left * lateral
+                    + DVec3::Z * (ground + self.camera_height_m);
+                let base = splat::city::camera_looking_down(position, heading);
+                // Camera X is forward: roll about X, pitch about Y (with the ground's
+                // slope and the kerb), yaw about Z.
+                let pitch = sway(1) + slope.atan() + kerb_pitch;
+                let rotation =
+                    Isometry3::from_pose_vector([0.0, 0.0, 0.0, sway(0), pitch, sway(2)])
+                        .unwrap_or(Isometry3::IDENTITY);
+                base * rotation
+            })
+            .collect()
+    }
+}
+
+impl Acquisition {
+    /// Check every field.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let values = [
+            self.vignetting,
+            self.gain_amplitude,
+            self.offset_amplitude,
+            self.blur_sigma_px,
+            self.noise_sigma,
+        ];
+        anyhow::ensure!(
+            values.iter().all(|v| *v >= 0.0 && v.is_finite()),
+            "acquisition values must be finite and >= 0"
+        );
+        anyhow::ensure!(
+            self.vignetting < 1.0 && self.gain_amplitude < 1.0,
+            "acquisition.vignetting and gain_amplitude must be < 1"
+        );
+        anyhow::ensure!(
+            self.gain_period_s > 0.0 && self.gain_period_s.is_finite(),
+            "acquisition.gain_period_s must be > 0"
+        );
+        anyhow::ensure!(
+            self.blur_sigma_px <= 5.0,
+            "acquisition.blur_sigma_px must be <= 5"
+        );
+        Ok(())
+    }
+
+    /// Degrade a rendered frame into an "acquired" one, for frame `index` at time
+    /// `time_s`. Every pixel of the camera's valid region becomes a measurement (the
+    /// sky included, as a real camera sees it).
+    pub fn degrade(&self, frame: &mut Frame, camera: &Camera, index: usize, time_s: f64) {
+        let (w, h) = (frame.width() as usize, frame.height() as usize);
+        let valid = camera.valid_pixels();
+        let (centre, radius) = match camera.region() {
+            ValidRegion::Annulus(a) => (a.center_px, a.outer_radius_px),
+            _ => {
+                let c = [(w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0];
+                (c, (c[0] * c[0] + c[1] * c[1]).sqrt().max(1.0))
+            }
+        };
+        let phase = std::f64::consts::TAU * time_s / self.gain_period_s;
+        let gain = 1.0 + self.gain_amplitude * phase.sin();
+        let offset = self.offset_amplitude * phase.cos();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if !valid[i] {
+                    continue;
+                }
+                let r2 = ((x as f64 - centre[0]).powi(2) + (y as f64 - centre[1]).powi(2))
+                    / (radius * radius);
+                let v = f64::from(frame.intensity[i]) * (1.0 - self.vignetting * r2.min(1.0));
+                frame.intensity[i] = (gain * v + offset) as f32;
+            }
+        }
+        if self.blur_sigma_px > 0.0 {
+            blur(frame, valid, self.blur_sigma_px);
+        }
+        let mut rng = SplitMix64::new(
+            splat::rng::mix64(self.noise_seed) ^ (index as u64).wrapping_mul(0x9E37_79B9),
+        );
+        for i in 0..w * h {
+            if valid[i] {
+                let noisy = f64::from(frame.intensity[i]) + self.noise_sigma * rng.normal();
+                frame.intensity[i] = noisy.clamp(0.0, 1.0) as f32;
+                if frame.status[i] == PixelStatus::Sky {
+                    frame.status[i] = PixelStatus::Hit;
+                    frame.range_m[i] = f32::INFINITY;
+                }
+            }
+        }
+    }
+}
+
+/// Separable Gaussian blur of the valid pixels (normalised over the valid
+/// neighbours, so the mask's edge does not darken).
+fn blur(frame: &mut Frame, valid: &[bool], sigma: f64) {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let radius = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-radius..=radius)
+        .map(|d| (-(d * d) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let pass = |src: &[f32], horizontal: bool| -> Vec<f32> {
+        let mut out = src.to_vec();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if !valid[i] {
+                    continue;
+                }
+                let (mut sum, mut weight) = (0.0f64, 0.0f64);
+                for (k, g) in kernel.iter().enumerate() {
+                    let d = k as isize - radius;
+                    let (xx, yy) = if horizontal {
+                        (x as isize + d, y as isize)
+                    } else {
+                        (x as isize, y as isize + d)
+                    };
+                    if xx < 0 || yy < 0 || xx >= w as isize || yy >= h as isize {
+                        continue;
+                    }
+                    let j = yy as usize * w + xx as usize;
+                    if valid[j] {
+                        sum += g * f64::from(src[j]);
+                        weight += g;
+                    }
+                }
+                out[i] = (sum / weight) as f32;
+            }
+        }
+        out
+    };
+    let rows = pass(&frame.intensity, true);
+    frame.intensity = pass(&rows, false);
+}

@@ -1,0 +1,773 @@
+//! Tracking by successive alignments (paper §4): the sequence file, the tracking runs,
+//! their per-frame records, summary and plots.
+//!
+//! ```toml
+//! name = "fig4"
+//! camera = "omni-320x240.toml"     # camera TOML, relative to this file
+//! methods = ["povs", "rule2"]      # PoT and PGMoT
+//! steps = [1, 2, 5, 10, 20]        # use 1 frame in N
+//! lost_threshold_m = 0.5           # a track is lost beyond this position error
+//! initial_offset = [0.05, -0.05, 0.02, 0.01, -0.01, 0.02]  # first frame's start, (t, θw) in the true camera's frame
+//!
+//! [scene]                          # as in a protocol file
+//! kind = "city"
+//! seed = 1
+//!
+//! [trajectory]                     # sequence::Trajectory (defaults: the paper's robot)
+//! frames = 210
+//! [trajectory.shake]               # sequence::Shake
+//! [acquisition]                    # sequence::Acquisition
+//! [vvs]                            # any vvs::VvsConfig field; normalize = true by default
+//! ```
+//!
+//! Each track (method, N) aligns frames `0, N, 2N, …` of the sequence; frame `0`
+//! starts from the true pose composed with `initial_offset`, every later one from the
+//! previous frame's estimate. The brightness of the acquired and rendered images is
+//! centred and normalised (the paper's §4) unless the file's `[vvs]` says otherwise.
+//! A track stops at the first frame whose position error exceeds `lost_threshold_m`
+//! (or whose optimisation diverges): it is lost.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{Context, bail, ensure};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde::Deserialize;
+use splat::city::{City, CityParams};
+use splat::{Frame, PointCloud, RenderOptions, Renderer};
+use ucm::{Camera, Isometry3};
+use vvs::{Method, Servo, StopReason, VvsConfig};
+
+use crate::protocol::Scene;
+use crate::sequence::{Acquisition, Trajectory};
+
+/// A parsed sequence file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SequenceSpec {
+    /// Name, used in titles.
+    pub name: String,
+    /// Camera TOML path (relative to the file).
+    pub camera: PathBuf,
+    /// Methods: `povs` (PoT) and PGM rules (PGMoT with `rule2`).
+    pub methods: Vec<Method>,
+    /// Frame steps N (use 1 frame in N).
+    pub steps: Vec<usize>,
+    /// Position error beyond which a track is lost, metres.
+    #[serde(default = "default_lost")]
+    pub lost_threshold_m: f64,
+    /// Offset of the first frame's initial pose from the truth, `(t, θw)` (m, rad) in
+    /// the true camera's frame.
+    #[serde(default = "default_initial_offset")]
+    pub initial_offset: [f64; 6],
+    /// The cloud.
+    pub scene: Scene,
+    /// The trajectory.
+    #[serde(default)]
+    pub trajectory: Trajectory,
+    /// The acquired images.
+    #[serde(default)]
+    pub acquisition: Acquisition,
+    /// Optimiser settings (TOML table of `vvs::VvsConfig` fields).
+    #[serde(default)]
+    pub vvs: toml::Table,
+    /// The folder of the file (set when loading).
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+}
+
+fn default_lost() -> f64 {
+    0.5
+}
+
+fn default_initial_offset() -> [f64; 6] {
+    [0.05, -0.05, 0.02, 0.01, -0.01, 0.02]
+}
+
+impl SequenceSpec {
+    /// Load and check a sequence file.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading sequence {}", path.display()))?;
+        let mut spec: SequenceSpec = toml::from_str(&text)
+            .with_context(|| format!("parsing sequence {}", path.display()))?;
+        spec.base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        spec.check()?;
+        Ok(spec)
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        ensure!(!self.methods.is_empty(), "the sequence names no method");
+        ensure!(
+            !self.steps.is_empty() && self.steps.iter().all(|&n| n >= 1),
+            "steps must be a non-empty list of N >= 1"
+        );
+        ensure!(
+            self.lost_threshold_m > 0.0 && self.lost_threshold_m.is_finite(),
+            "lost_threshold_m must be > 0"
+        );
+        ensure!(
+            self.initial_offset.iter().all(|v| v.is_finite()),
+            "initial_offset must be finite"
+        );
+        self.trajectory.validate()?;
+        self.acquisition.validate()?;
+        self.vvs_config()?;
+        Ok(())
+    }
+
+    /// A path of the file, resolved against its folder.
+    pub fn resolve(&self, path: &Path) -> PathBuf {
+        if path.is_relative() {
+            self.base_dir.join(path)
+        } else {
+            path.to_path_buf()
+        }
+    }
+
+    /// The optimiser configuration: the paper's defaults, brightness normalised (§4),
+    /// then the file's `[vvs]` table.
+    pub fn vvs_config(&self) -> anyhow::Result<VvsConfig> {
+        let mut table = toml::Table::new();
+        table.insert("normalize".into(), toml::Value::Boolean(true));
+        table.insert("keep_history".into(), toml::Value::Boolean(false));
+        for (k, v) in &self.vvs {
+            table.insert(k.clone(), v.clone());
+        }
+        let text = toml::to_string(&table)?;
+        VvsConfig::from_toml_str(&text).context("the sequence's [vvs] table")
+    }
+
+    /// The camera.
+    pub fn load_camera(&self) -> anyhow::Result<Camera> {
+        let path = self.resolve(&self.camera);
+        Camera::load_toml(&path).with_context(|| format!("reading camera {}", path.display()))
+    }
+
+    /// The cloud the images are rendered from, and the cloud the acquired images are
+    /// rendered from (another sampling of the generated city; the same LAS cloud).
+    pub fn load_clouds(&self) -> anyhow::Result<(PointCloud, Option<PointCloud>)> {
+        match &self.scene {
+            Scene::City { seed, spacing_m } => {
+                let params = CityParams {
+                    seed: *seed,
+                    spacing_m: *spacing_m,
+                    ..CityParams::default()
+                };
+                let model = City::generate(&params)?;
+                let acquired = City::generate(&CityParams {
+                    sampling_seed: Some(self.acquisition.sampling_seed),
+                    ..params
+                })?;
+                Ok((model.cloud, Some(acquired.cloud)))
+            }
+            Scene::Las { path } => {
+                let path = self.resolve(path);
+                let (cloud, _) = splat::read_las(&path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                Ok((cloud, None))
+            }
+        }
+    }
+}
+
+/// The acquired images of every frame in `needed` (others left empty), rendered at
+/// the true poses and degraded.
+pub fn acquire(
+    cloud: &PointCloud,
+    camera: &Camera,
+    poses: &[Isometry3],
+    trajectory: &Trajectory,
+    acquisition: &Acquisition,
+    needed: &[bool],
+) -> anyhow::Result<Vec<Option<Frame>>> {
+    let mut renderer = Renderer::new(camera.clone(), RenderOptions::default())?;
+    let mut frames = Vec::with_capacity(poses.len());
+    for (k, pose) in poses.iter().enumerate() {
+        if !needed[k] {
+            frames.push(None);
+            continue;
+        }
+        let mut frame = Frame::for_camera(camera);
+        let stats = renderer.render(cloud, &pose.inverse(), &mut frame)?;
+        if stats.pixels_hit == 0 {
+            bail!("frame {k}: the camera sees no point of the cloud at its true pose");
+        }
+        acquisition.degrade(&mut frame, camera, k, trajectory.time_s(k));
+        frames.push(Some(frame));
+    }
+    Ok(frames)
+}
+
+/// One tracked frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameRecord {
+    /// Method name (`povs`, `rule2`, …).
+    pub method: String,
+    /// Frame step N.
+    pub step: usize,
+    /// Index of the frame in the sequence.
+    pub frame: usize,
+    /// Time of the frame, seconds.
+    pub time_s: f64,
+    /// True `world_from_camera`, `(t, θw)`.
+    pub true_pose: [f64; 6],
+    /// Estimated `world_from_camera`, `(t, θw)`.
+    pub estimated_pose: [f64; 6],
+    /// Position error, metres.
+    pub position_error_m: f64,
+    /// Rotation error, degrees.
+    pub rotation_error_deg: f64,
+    /// Iterations of step 1 and step 2.
+    pub iterations: [usize; 2],
+    /// Why the optimisation stopped.
+    pub stop: String,
+    /// Wall time of the frame's alignment, seconds.
+    pub wall_time_s: f64,
+}
+
+/// Track one method with one frame step: returns the records of the frames aligned
+/// (the last one is where the track was lost, if it was) and whether it was lost.
+pub fn track(
+    servo: &mut Servo<'_>,
+    method: Method,
+    step: usize,
+    spec: &SequenceSpec,
+    truth: &[Isometry3],
+    acquired: &[Option<Frame>],
+) -> anyhow::Result<(Vec<FrameRecord>, bool)> {
+    let mut estimate = truth[0] * Isometry3::from_pose_vector(spec.initial_offset)?;
+    let mut records = Vec::new();
+    for k in (0..truth.len()).step_by(step) {
+        let desired = acquired[k]
+            .as_ref()
+            .with_context(|| format!("frame {k} was not acquired"))?;
+        let started = Instant::now();
+        let outcome = servo.run(method, desired, estimate)?;
+        let wall_time_s = started.elapsed().as_secs_f64();
+        estimate = outcome.world_from_camera;
+        let (dt, dr) = estimate.distance_to(&truth[k]);
+        records.push(FrameRecord {
+            method: method.name().to_string(),
+            step,
+            frame: k,
+            time_s: spec.trajectory.time_s(k),
+            true_pose: truth[k].to_pose_vector(),
+            estimated_pose: estimate.to_pose_vector(),
+            position_error_m: dt,
+            rotation_error_deg: dr.to_degrees(),
+            iterations: outcome.iterations,
+            stop: outcome.stop.name().to_string(),
+            wall_time_s,
+        });
+        if dt > spec.lost_threshold_m || matches!(outcome.stop, StopReason::Diverged(_)) {
+            return Ok((records, true));
+        }
+    }
+    Ok((records, false))
+}
+
+/// Everything a tracking experiment produced.
+#[derive(Debug)]
+pub struct TrackingResults {
+    /// Every aligned frame, by method then step then frame.
+    pub records: Vec<FrameRecord>,
+    /// Whether each (method, step) track was lost.
+    pub lost: Vec<(String, usize, bool)>,
+    /// The ground truth of every frame.
+    pub truth: Vec<Isometry3>,
+    /// Wall time of the whole experiment, seconds.
+    pub wall_time_s: f64,
+}
+
+/// Run every (method, step) track of the sequence, in parallel over rayon (each track
+/// is sequential; results do not depend on the thread count), with a progress bar.
+pub fn run_sequence(
+    spec: &SequenceSpec,
+    camera: &Camera,
+    cloud: &PointCloud,
+    acquired_cloud: Option<&PointCloud>,
+) -> anyhow::Result<(TrackingResults, Vec<Option<Frame>>)> {
+    let started = Instant::now();
+    let truth = spec.trajectory.poses();
+    let mut needed = vec![false; truth.len()];
+    for &n in &spec.steps {
+        for k in (0..truth.len()).step_by(n) {
+            needed[k] = true;
+        }
+    }
+    let acquired = acquire(
+        acquired_cloud.unwrap_or(cloud),
+        camera,
+        &truth,
+        &spec.trajectory,
+        &spec.acquisition,
+        &needed,
+    )?;
+    let config = spec.vvs_config()?;
+    let jobs: Vec<(Method, usize)> = spec
+        .methods
+        .iter()
+        .flat_map(|&m| spec.steps.iter().map(move |&n| (m, n)))
+        .collect();
+    let total_frames: u64 = jobs
+        .iter()
+        .map(|&(_, n)| truth.len().div_ceil(n) as u64)
+        .sum();
+    let bar = ProgressBar::new(total_frames);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames, ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let bar = Mutex::new(bar);
+    let outputs: Vec<anyhow::Result<(Vec<FrameRecord>, bool)>> = jobs
+        .par_iter()
+        .map(|&(method, n)| {
+            let mut servo = Servo::new(cloud, camera, config.clone())?;
+            let (records, lost) = track(&mut servo, method, n, spec, &truth, &acquired)?;
+            if let Ok(b) = bar.lock() {
+                b.inc(truth.len().div_ceil(n) as u64);
+            }
+            Ok((records, lost))
+        })
+        .collect();
+    if let Ok(b) = bar.lock() {
+        b.finish_and_clear();
+    }
+    let mut records = Vec::new();
+    let mut lost = Vec::new();
+    for (&(method, n), output) in jobs.iter().zip(outputs) {
+        let (r, l) = output.with_context(|| format!("tracking {} with N = {n}", method.name()))?;
+        records.extend(r);
+        lost.push((method.name().to_string(), n, l));
+    }
+    Ok((
+        TrackingResults {
+            records,
+            lost,
+            truth,
+            wall_time_s: started.elapsed().as_secs_f64(),
+        },
+        acquired,
+    ))
+}
+
+const CSV_HEADER: &str = "method,step,frame,time_s,true_tx,true_ty,true_tz,true_wx,true_wy,true_wz,est_tx,est_ty,est_tz,est_wx,est_wy,est_wz,position_error_m,rotation_error_deg,iterations_step1,iterations_step2,stop,wall_time_s";
+
+/// Write the per-frame CSV.
+pub fn write_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
+    let mut s = String::from(CSV_HEADER);
+    s.push('\n');
+    for r in records {
+        let _ = write!(s, "{},{},{},{:.6}", r.method, r.step, r.frame, r.time_s);
+        for v in r.true_pose.iter().chain(&r.estimated_pose) {
+            let _ = write!(s, ",{v:.9}");
+        }
+        let _ = writeln!(
+            s,
+            ",{:.9},{:.6},{},{},{},{:.6}",
+            r.position_error_m,
+            r.rotation_error_deg,
+            r.iterations[0],
+            r.iterations[1],
+            r.stop,
+            r.wall_time_s
+        );
+    }
+    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Read a per-frame CSV written by [`write_csv`].
+pub fn read_csv(path: &Path) -> anyhow::Result<Vec<FrameRecord>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    ensure!(
+        lines.next() == Some(CSV_HEADER),
+        "{}: not a tracking CSV",
+        path.display()
+    );
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let f: Vec<&str> = line.split(',').collect();
+            ensure!(
+                f.len() == 22,
+                "{}: line {}: {} fields",
+                path.display(),
+                i + 2,
+                f.len()
+            );
+            let num = |k: usize| -> anyhow::Result<f64> {
+                f[k].parse()
+                    .with_context(|| format!("{}: line {}: field {k}", path.display(), i + 2))
+            };
+            let mut true_pose = [0.0; 6];
+            let mut estimated_pose = [0.0; 6];
+            for j in 0..6 {
+                true_pose[j] = num(4 + j)?;
+                estimated_pose[j] = num(10 + j)?;
+            }
+            Ok(FrameRecord {
+                method: f[0].to_string(),
+                step: num(1)? as usize,
+                frame: num(2)? as usize,
+                time_s: num(3)?,
+                true_pose,
+                estimated_pose,
+                position_error_m: num(16)?,
+                rotation_error_deg: num(17)?,
+                iterations: [num(18)? as usize, num(19)? as usize],
+                stop: f[20].to_string(),
+                wall_time_s: num(21)?,
+            })
+        })
+        .collect()
+}
+
+/// Summary of one track.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackSummary {
+    /// Method name.
+    pub method: String,
+    /// Frame step N.
+    pub step: usize,
+    /// Frames aligned.
+    pub frames: usize,
+    /// Frames the track should have aligned.
+    pub expected_frames: usize,
+    /// Root mean square position error over the aligned frames, metres.
+    pub rmse_position_m: f64,
+    /// Root mean square rotation error, degrees.
+    pub rmse_rotation_deg: f64,
+    /// Position error at the last aligned frame (the drift), metres.
+    pub final_drift_m: f64,
+    /// Largest position error, metres.
+    pub max_position_error_m: f64,
+    /// Whether the track was lost, and at which frame.
+    pub lost_at: Option<usize>,
+    /// Mean wall time per frame, seconds.
+    pub mean_time_per_frame_s: f64,
+    /// Mean iterations per frame.
+    pub mean_iterations: f64,
+}
+
+/// Summarise every track, in the order of `lost`.
+pub fn summarize(results: &TrackingResults) -> Vec<TrackSummary> {
+    results
+        .lost
+        .iter()
+        .map(|(method, step, lost)| {
+            let rs: Vec<&FrameRecord> = results
+                .records
+                .iter()
+                .filter(|r| &r.method == method && r.step == *step)
+                .collect();
+            let n = rs.len().max(1) as f64;
+            let rms = |f: &dyn Fn(&FrameRecord) -> f64| {
+                (rs.iter().map(|r| f(r).powi(2)).sum::<f64>() / n).sqrt()
+            };
+            TrackSummary {
+                method: method.clone(),
+                step: *step,
+                frames: rs.len(),
+                expected_frames: results.truth.len().div_ceil(*step),
+                rmse_position_m: rms(&|r| r.position_error_m),
+                rmse_rotation_deg: rms(&|r| r.rotation_error_deg),
+                final_drift_m: rs.last().map_or(f64::NAN, |r| r.position_error_m),
+                max_position_error_m: rs.iter().map(|r| r.position_error_m).fold(0.0, f64::max),
+                lost_at: if *lost {
+                    rs.last().map(|r| r.frame)
+                } else {
+                    None
+                },
+                mean_time_per_frame_s: rs.iter().map(|r| r.wall_time_s).sum::<f64>() / n,
+                mean_iterations: rs
+                    .iter()
+                    .map(|r| (r.iterations[0] + r.iterations[1]) as f64)
+                    .sum::<f64>()
+                    / n,
+            }
+        })
+        .collect()
+}
+
+/// Display name of a method in tracking (the paper's PoT and PGMoT).
+pub fn display_name(method: &str) -> String {
+    match method {
+        "povs" => "PoT".into(),
+        "rule2" => "PGMoT".into(),
+        other => format!("PGMoT ({other})"),
+    }
+}
+
+/// The Markdown summary table.
+pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m: f64) -> String {
+    let mut s = format!("# {title}\n\n");
+    let _ = writeln!(
+        s,
+        "{} frames of ground truth; a track is lost when its position error exceeds {:.2} m \
+         or its optimisation diverges. Wall time {:.1} min.\n",
+        results.truth.len(),
+        lost_threshold_m,
+        results.wall_time_s / 60.0
+    );
+    s.push_str("| method | N | frames | position RMSE | rotation RMSE | final drift | max error | lost | time per frame | iterations per frame |\n");
+    s.push_str("|---|---:|---:|---:|---:|---:|---:|---|---:|---:|\n");
+    for t in summarize(results) {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {}/{} | {:.4} m | {:.3}° | {:.4} m | {:.4} m | {} | {:.2} s | {:.0} |",
+            display_name(&t.method),
+            t.step,
+            t.frames,
+            t.expected_frames,
+            t.rmse_position_m,
+            t.rmse_rotation_deg,
+            t.final_drift_m,
+            t.max_position_error_m,
+            t.lost_at
+                .map_or("no".to_string(), |k| format!("at frame {k}")),
+            t.mean_time_per_frame_s,
+            t.mean_iterations
+        );
+    }
+    s.push_str(
+        "\nPaper (§4, qualitative, against a Lidar SLAM trajectory): PoT drifts as N grows \
+         and fails at N = 20; PGMoT keeps tracking.\n",
+    );
+    s
+}
+
+/// Plot the trajectories seen from above (ground truth and every track) and the
+/// position error per frame, as PNG and SVG under `out`.
+pub fn plot(results: &TrackingResults, out: &Path) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    crate::register_font();
+    let trajectories = |name: &str| out.join(name);
+    draw_trajectories(
+        BitMapBackend::new(&trajectories("trajectories.png"), (900, 700)).into_drawing_area(),
+        results,
+    )?;
+    draw_trajectories(
+        SVGBackend::new(&trajectories("trajectories.svg"), (900, 700)).into_drawing_area(),
+        results,
+    )?;
+    draw_errors(
+        BitMapBackend::new(&out.join("errors.png"), (900, 600)).into_drawing_area(),
+        results,
+    )?;
+    draw_errors(
+        SVGBackend::new(&out.join("errors.svg"), (900, 600)).into_drawing_area(),
+        results,
+    )?;
+    Ok(())
+}
+
+fn track_color(index: usize) -> plotters::style::RGBAColor {
+    use plotters::style::{Color, Palette, Palette99};
+    Palette99::pick(index).to_rgba()
+}
+
+fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    results: &TrackingResults,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
+    root.fill(&WHITE).map_err(err)?;
+    let truth: Vec<(f64, f64)> = results
+        .truth
+        .iter()
+        .map(|p| (p.translation.x, p.translation.y))
+        .collect();
+    // Frame the ground truth with a margin; lost tracks leave the plot.
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y) in &truth {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let half = ((x1 - x0).max(y1 - y0) / 2.0 + 0.5).max(1.0);
+    let mut chart = ChartBuilder::on(&root)
+        .caption("Trajectories seen from above", ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(
+            (cx - half * 1.3)..(cx + half * 1.3),
+            (cy - half)..(cy + half),
+        )
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("world X (m)")
+        .y_desc("world Y (m)")
+        .draw()
+        .map_err(err)?;
+    chart
+        .draw_series(LineSeries::new(truth, BLACK.stroke_width(3)))
+        .map_err(err)?
+        .label("ground truth")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
+    for (i, (method, step, _)) in results.lost.iter().enumerate() {
+        let points: Vec<(f64, f64)> = results
+            .records
+            .iter()
+            .filter(|r| &r.method == method && r.step == *step)
+            .map(|r| (r.estimated_pose[0], r.estimated_pose[1]))
+            .collect();
+        let color = track_color(i);
+        chart
+            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+            .map_err(err)?
+            .label(format!("{} N={step}", display_name(method)))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart
+            .draw_series(
+                points
+                    .into_iter()
+                    .map(|p| Circle::new(p, 2, color.filled())),
+            )
+            .map_err(err)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+fn draw_errors<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    results: &TrackingResults,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
+    root.fill(&WHITE).map_err(err)?;
+    let frames = results.truth.len().max(2) as f64;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("Position error per frame", ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..frames, (1e-4f64..10.0f64).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("frame")
+        .y_desc("position error (m)")
+        .draw()
+        .map_err(err)?;
+    for (i, (method, step, _)) in results.lost.iter().enumerate() {
+        let points: Vec<(f64, f64)> = results
+            .records
+            .iter()
+            .filter(|r| &r.method == method && r.step == *step)
+            .map(|r| (r.frame as f64, r.position_error_m.clamp(1e-4, 10.0)))
+            .collect();
+        let color = track_color(i);
+        chart
+            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .map_err(err)?
+            .label(format!("{} N={step}", display_name(method)))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// The superimposition of an acquired image (red) and the image rendered at the
+/// estimated pose (green and blue), as the paper's Fig. 4d–e: where they agree the
+/// picture is grey, where they differ colour fringes appear. Masked pixels are black.
+pub fn write_overlay(acquired: &Frame, rendered: &Frame, path: &Path) -> anyhow::Result<()> {
+    ensure!(
+        acquired.width() == rendered.width() && acquired.height() == rendered.height(),
+        "overlay of images of different sizes"
+    );
+    let (w, h) = (acquired.width(), acquired.height());
+    let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let mut image = image::RgbImage::new(w, h);
+    for (i, pixel) in image.pixels_mut().enumerate() {
+        if rendered.status[i] == splat::PixelStatus::Masked {
+            continue;
+        }
+        let (a, r) = (to_u8(acquired.intensity[i]), to_u8(rendered.intensity[i]));
+        *pixel = image::Rgb([a, r, r]);
+    }
+    image
+        .save(path)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// Write `frames.csv`, `summary.md`, the plots (`trajectories`, `errors`, PNG and
+/// SVG), and for the largest N the last acquired image and, per method, the
+/// superimposition of the acquired image and the image rendered at the estimate of the
+/// last frame the track reached (`overlay-nN-METHOD-frameK.png`). Returns the summary.
+pub fn write_results(
+    spec: &SequenceSpec,
+    camera: &Camera,
+    cloud: &PointCloud,
+    results: &TrackingResults,
+    acquired: &[Option<Frame>],
+    out: &Path,
+) -> anyhow::Result<String> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    write_csv(&out.join("frames.csv"), &results.records)?;
+    let summary = summary_markdown(&spec.name, results, spec.lost_threshold_m);
+    std::fs::write(out.join("summary.md"), &summary)?;
+    plot(results, out)?;
+    let Some(&n) = spec.steps.iter().max() else {
+        return Ok(summary);
+    };
+    let last = results.truth.len().saturating_sub(1) / n * n;
+    if let Some(frame) = &acquired[last] {
+        frame.save_png(out.join(format!("acquired-n{n}-frame{last}.png")))?;
+        let mut renderer = Renderer::new(camera.clone(), RenderOptions::default())?;
+        for method in &spec.methods {
+            let name = method.name();
+            // The estimate at the last frame the track reached.
+            let Some(r) = results
+                .records
+                .iter()
+                .rfind(|r| r.method == name && r.step == n)
+            else {
+                continue;
+            };
+            let pose = Isometry3::from_pose_vector(r.estimated_pose)?;
+            let mut rendered = Frame::for_camera(camera);
+            renderer.render(cloud, &pose.inverse(), &mut rendered)?;
+            let target = acquired[r.frame].as_ref().unwrap_or(frame);
+            write_overlay(
+                target,
+                &rendered,
+                &out.join(format!(
+                    "overlay-n{n}-{}-frame{}.png",
+                    display_name(name),
+                    r.frame
+                )),
+            )?;
+        }
+    }
+    Ok(summary)
+}
