@@ -99,8 +99,16 @@ pub fn check_fig4(sequence: &std::path::Path, out: &std::path::Path) -> anyhow::
             }
         }
     }
-    for name in files {
-        let path = out.join(&name);
+    ensure_files(out, &files)
+}
+
+/// Every file of `names` exists under `out` and is not empty.
+fn ensure_files<S: AsRef<std::path::Path>>(
+    out: &std::path::Path,
+    names: &[S],
+) -> anyhow::Result<()> {
+    for name in names {
+        let path = out.join(name);
         ensure!(
             path.metadata().map(|m| m.len() > 0).unwrap_or(false),
             "{} is missing or empty",
@@ -151,14 +159,7 @@ pub fn check(
     quick: bool,
     extras: bool,
 ) -> anyhow::Result<()> {
-    for name in ["runs.csv", "summary.md", "cdf.png", "cdf.svg"] {
-        let path = out.join(name);
-        ensure!(
-            path.metadata().map(|m| m.len() > 0).unwrap_or(false),
-            "{} is missing or empty",
-            path.display()
-        );
-    }
+    ensure_files(out, &["runs.csv", "summary.md", "cdf.png", "cdf.svg"])?;
     let protocol = Protocol::load(protocol_path)?;
     let records = read_csv(&out.join("runs.csv"))?;
     let methods = protocol.method_configs(extras)?;

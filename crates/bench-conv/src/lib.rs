@@ -28,9 +28,33 @@ pub mod run;
 pub mod sequence;
 pub mod tracking;
 
+use std::path::{Path, PathBuf};
+
 use anyhow::{Context, bail};
 use glam::DVec3;
 use ucm::Isometry3;
+
+/// Read and parse a TOML file (`what` names it in errors); returns the value and the
+/// file's folder, against which the paths it holds are resolved ([`resolve`]).
+pub fn load_toml<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    what: &str,
+) -> anyhow::Result<(T, PathBuf)> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading {what} {}", path.display()))?;
+    let value =
+        toml::from_str(&text).with_context(|| format!("parsing {what} {}", path.display()))?;
+    Ok((value, path.parent().unwrap_or(Path::new(".")).to_path_buf()))
+}
+
+/// `path` resolved against `base_dir` when relative.
+pub fn resolve(base_dir: &Path, path: &Path) -> PathBuf {
+    if path.is_relative() {
+        base_dir.join(path)
+    } else {
+        path.to_path_buf()
+    }
+}
 
 /// Parse `n` comma-separated numbers.
 pub fn parse_numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {

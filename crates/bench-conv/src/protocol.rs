@@ -126,6 +126,45 @@ pub enum Scene {
     },
 }
 
+impl Scene {
+    /// Generate the city or read the LAS/LAZ file (a relative path is resolved against
+    /// `base_dir`); returns the cloud and a short name of the scene. `sampling_seed`
+    /// resamples the city's surfaces ([`splat::city::CityParams::sampling_seed`]).
+    pub fn load(
+        &self,
+        base_dir: &Path,
+        sampling_seed: Option<u64>,
+    ) -> anyhow::Result<(splat::PointCloud, String)> {
+        match self {
+            Scene::City { seed, spacing_m } => {
+                let city = splat::city::City::generate(&splat::city::CityParams {
+                    seed: *seed,
+                    spacing_m: *spacing_m,
+                    sampling_seed,
+                    ..splat::city::CityParams::default()
+                })?;
+                eprintln!(
+                    "city seed {seed}: {} points in {:.1} s",
+                    city.cloud.len(),
+                    city.generation_time_s
+                );
+                Ok((city.cloud, format!("city-{seed}")))
+            }
+            Scene::Las { path } => {
+                let path = crate::resolve(base_dir, path);
+                let (cloud, _) = splat::read_las(&path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                let name = path
+                    .file_stem()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+                    .into_owned();
+                Ok((cloud, name))
+            }
+        }
+    }
+}
+
 fn default_spacing() -> f64 {
     0.05
 }
@@ -199,11 +238,8 @@ pub struct RunSpec {
 impl Protocol {
     /// Read and check a protocol file.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading protocol {}", path.display()))?;
-        let mut protocol: Protocol = toml::from_str(&text)
-            .with_context(|| format!("parsing protocol {}", path.display()))?;
-        protocol.base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let (mut protocol, base_dir): (Protocol, _) = crate::load_toml(path, "protocol")?;
+        protocol.base_dir = base_dir;
         protocol.check()?;
         Ok(protocol)
     }
@@ -236,11 +272,7 @@ impl Protocol {
 
     /// A path of the protocol, resolved against its folder.
     pub fn resolve(&self, path: &Path) -> PathBuf {
-        if path.is_relative() {
-            self.base_dir.join(path)
-        } else {
-            path.to_path_buf()
-        }
+        crate::resolve(&self.base_dir, path)
     }
 
     /// `world_from_camera` of desired pose `k`.

@@ -8,40 +8,14 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use splat::PointCloud;
-use splat::city::{City, CityParams};
 use vvs::Servo;
 
-use crate::protocol::{MethodConfig, Protocol, RunSpec, Scene};
+use crate::protocol::{MethodConfig, Protocol, RunSpec};
 use crate::report::RunRecord;
 
 /// Load or generate the protocol's cloud.
 pub fn load_scene(protocol: &Protocol) -> anyhow::Result<(PointCloud, String)> {
-    match &protocol.scene {
-        Scene::City { seed, spacing_m } => {
-            let city = City::generate(&CityParams {
-                seed: *seed,
-                spacing_m: *spacing_m,
-                ..CityParams::default()
-            })?;
-            eprintln!(
-                "city seed {seed}: {} points in {:.1} s",
-                city.cloud.len(),
-                city.generation_time_s
-            );
-            Ok((city.cloud, format!("city-{seed}")))
-        }
-        Scene::Las { path } => {
-            let path = protocol.resolve(path);
-            let (cloud, _) =
-                splat::read_las(&path).with_context(|| format!("reading {}", path.display()))?;
-            let name = path
-                .file_stem()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned();
-            Ok((cloud, name))
-        }
-    }
+    protocol.scene.load(&protocol.base_dir, None)
 }
 
 /// Which runs of the protocol this process executes: all, or shard `i` of `n`

@@ -36,7 +36,6 @@ use anyhow::{Context, bail, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Deserialize;
-use splat::city::{City, CityParams};
 use splat::{Frame, PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 use vvs::{Method, Servo, StopReason, VvsConfig};
@@ -90,11 +89,8 @@ fn default_initial_offset() -> [f64; 6] {
 impl SequenceSpec {
     /// Load and check a sequence file.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading sequence {}", path.display()))?;
-        let mut spec: SequenceSpec = toml::from_str(&text)
-            .with_context(|| format!("parsing sequence {}", path.display()))?;
-        spec.base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let (mut spec, base_dir): (SequenceSpec, _) = crate::load_toml(path, "sequence")?;
+        spec.base_dir = base_dir;
         spec.check()?;
         Ok(spec)
     }
@@ -121,11 +117,7 @@ impl SequenceSpec {
 
     /// A path of the file, resolved against its folder.
     pub fn resolve(&self, path: &Path) -> PathBuf {
-        if path.is_relative() {
-            self.base_dir.join(path)
-        } else {
-            path.to_path_buf()
-        }
+        crate::resolve(&self.base_dir, path)
     }
 
     /// The optimiser configuration: the paper's defaults, brightness normalised (§4),
@@ -150,27 +142,15 @@ impl SequenceSpec {
     /// The cloud the images are rendered from, and the cloud the acquired images are
     /// rendered from (another sampling of the generated city; the same LAS cloud).
     pub fn load_clouds(&self) -> anyhow::Result<(PointCloud, Option<PointCloud>)> {
-        match &self.scene {
-            Scene::City { seed, spacing_m } => {
-                let params = CityParams {
-                    seed: *seed,
-                    spacing_m: *spacing_m,
-                    ..CityParams::default()
-                };
-                let model = City::generate(&params)?;
-                let acquired = City::generate(&CityParams {
-                    sampling_seed: Some(self.acquisition.sampling_seed),
-                    ..params
-                })?;
-                Ok((model.cloud, Some(acquired.cloud)))
+        let (model, _) = self.scene.load(&self.base_dir, None)?;
+        let acquired = match self.scene {
+            Scene::City { .. } => {
+                let seed = Some(self.acquisition.sampling_seed);
+                Some(self.scene.load(&self.base_dir, seed)?.0)
             }
-            Scene::Las { path } => {
-                let path = self.resolve(path);
-                let (cloud, _) = splat::read_las(&path)
-                    .with_context(|| format!("reading {}", path.display()))?;
-                Ok((cloud, None))
-            }
-        }
+            Scene::Las { .. } => None,
+        };
+        Ok((model, acquired))
     }
 }
 
@@ -281,6 +261,39 @@ pub struct TrackingResults {
     pub truth: Vec<Isometry3>,
     /// Wall time of the whole experiment, seconds.
     pub wall_time_s: f64,
+}
+
+/// A plotted track: legend label, colour, points.
+type Series = (String, plotters::style::RGBAColor, Vec<(f64, f64)>);
+
+impl TrackingResults {
+    /// The records of one track (method name, step N), in frame order.
+    pub fn track(
+        &self,
+        method: &str,
+        step: usize,
+    ) -> impl DoubleEndedIterator<Item = &FrameRecord> {
+        self.records
+            .iter()
+            .filter(move |r| r.method == method && r.step == step)
+    }
+
+    /// Every track as (legend label, colour, points given by `point`), in the order of
+    /// `lost`, for the plots.
+    fn series(&self, point: impl Fn(&FrameRecord) -> (f64, f64)) -> Vec<Series> {
+        use plotters::style::{Color, Palette, Palette99};
+        self.lost
+            .iter()
+            .enumerate()
+            .map(|(i, (method, step, _))| {
+                (
+                    format!("{} N={step}", display_name(method)),
+                    Palette99::pick(i).to_rgba(),
+                    self.track(method, *step).map(&point).collect(),
+                )
+            })
+            .collect()
+    }
 }
 
 /// Run every (method, step) track of the sequence, in parallel over rayon (each track
@@ -461,11 +474,7 @@ pub fn summarize(results: &TrackingResults) -> Vec<TrackSummary> {
         .lost
         .iter()
         .map(|(method, step, lost)| {
-            let rs: Vec<&FrameRecord> = results
-                .records
-                .iter()
-                .filter(|r| &r.method == method && r.step == *step)
-                .collect();
+            let rs: Vec<&FrameRecord> = results.track(method, *step).collect();
             let n = rs.len().max(1) as f64;
             let rms = |f: &dyn Fn(&FrameRecord) -> f64| {
                 (rs.iter().map(|r| f(r).powi(2)).sum::<f64>() / n).sqrt()
@@ -567,11 +576,6 @@ pub fn plot(results: &TrackingResults, out: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn track_color(index: usize) -> plotters::style::RGBAColor {
-    use plotters::style::{Color, Palette, Palette99};
-    Palette99::pick(index).to_rgba()
-}
-
 fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(
     root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
     results: &TrackingResults,
@@ -615,18 +619,11 @@ fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(
         .map_err(err)?
         .label("ground truth")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
-    for (i, (method, step, _)) in results.lost.iter().enumerate() {
-        let points: Vec<(f64, f64)> = results
-            .records
-            .iter()
-            .filter(|r| &r.method == method && r.step == *step)
-            .map(|r| (r.estimated_pose[0], r.estimated_pose[1]))
-            .collect();
-        let color = track_color(i);
+    for (label, color, points) in results.series(|r| (r.estimated_pose[0], r.estimated_pose[1])) {
         chart
             .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
             .map_err(err)?
-            .label(format!("{} N={step}", display_name(method)))
+            .label(label)
             .legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
             });
@@ -670,18 +667,13 @@ fn draw_errors<DB: plotters::prelude::DrawingBackend>(
         .y_desc("position error (m)")
         .draw()
         .map_err(err)?;
-    for (i, (method, step, _)) in results.lost.iter().enumerate() {
-        let points: Vec<(f64, f64)> = results
-            .records
-            .iter()
-            .filter(|r| &r.method == method && r.step == *step)
-            .map(|r| (r.frame as f64, r.position_error_m.clamp(1e-4, 10.0)))
-            .collect();
-        let color = track_color(i);
+    for (label, color, points) in
+        results.series(|r| (r.frame as f64, r.position_error_m.clamp(1e-4, 10.0)))
+    {
         chart
             .draw_series(LineSeries::new(points, color.stroke_width(2)))
             .map_err(err)?
-            .label(format!("{} N={step}", display_name(method)))
+            .label(label)
             .legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
             });
@@ -747,11 +739,7 @@ pub fn write_results(
         for method in &spec.methods {
             let name = method.name();
             // The estimate at the last frame the track reached.
-            let Some(r) = results
-                .records
-                .iter()
-                .rfind(|r| r.method == name && r.step == n)
-            else {
+            let Some(r) = results.track(name, n).next_back() else {
                 continue;
             };
             let pose = Isometry3::from_pose_vector(r.estimated_pose)?;

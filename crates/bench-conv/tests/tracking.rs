@@ -27,6 +27,17 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
     assert_eq!(quick.trajectory, full.trajectory);
     assert_eq!(quick.acquisition, full.acquisition);
     assert_eq!(full.steps, vec![1, 2, 5, 10, 20]);
+    // The vignetting ablation differs from the full sequence in its vignetting alone.
+    let ablation =
+        SequenceSpec::load(&root().join("fixtures/sequence-fig4-no-vignetting.toml")).unwrap();
+    assert_eq!(ablation.trajectory, full.trajectory);
+    assert_eq!(
+        ablation.acquisition,
+        Acquisition {
+            vignetting: 0.0,
+            ..full.acquisition.clone()
+        }
+    );
     assert!(full.vvs_config().unwrap().normalize);
 }
 
