@@ -2,15 +2,14 @@
 //! in a stable order whatever the thread count.
 
 use std::sync::Mutex;
-use std::time::Instant;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use splat::PointCloud;
-use vvs::Servo;
+use vvs::{Method, Servo, VvsConfig};
 
-use crate::protocol::{MethodConfig, Protocol, RunSpec};
+use crate::protocol::{Protocol, RunSpec};
 use crate::report::RunRecord;
 
 /// Load or generate the protocol's cloud.
@@ -18,8 +17,10 @@ pub fn load_scene(protocol: &Protocol) -> anyhow::Result<(PointCloud, String)> {
     protocol.scene.load(&protocol.base_dir, None)
 }
 
-/// Which runs of the protocol this process executes: all, or shard `i` of `n`
-/// (run ids congruent to `i` modulo `n`).
+/// Which runs of the protocol this process executes: all, or shard `i` of `n`: every
+/// method's runs from the poses `k ≡ i (mod n)`, poses numbered desired-major
+/// (`k = desired × initial poses per desired + initial`). Every shard thus samples
+/// every method, and a pose's methods stay together (Rule1 and Rule2 share step 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shard {
     /// This shard, `0..count`.
@@ -40,9 +41,9 @@ impl Shard {
         Ok(Self { index, count })
     }
 
-    /// Whether this shard runs `id`.
-    pub fn owns(&self, id: usize) -> bool {
-        id % self.count == self.index
+    /// Whether this shard runs the pose numbered `pose`.
+    pub fn owns(&self, pose: usize) -> bool {
+        pose % self.count == self.index
     }
 }
 
@@ -59,7 +60,7 @@ pub fn run_protocol(
     let runs: Vec<RunSpec> = protocol
         .runs(extras)?
         .into_iter()
-        .filter(|r| shard.is_none_or(|s| s.owns(r.id)))
+        .filter(|r| shard.is_none_or(|s| s.owns(r.id / methods.len())))
         .collect();
     // Bounds: every desired and initial pose must be inside the cloud's box.
     let (lo, hi) = cloud.bounds();
@@ -79,9 +80,29 @@ pub fn run_protocol(
     }
     // Desired images, rendered once.
     let mut renderer = Servo::new(cloud, &camera, methods[0].config.clone())?;
-    let desired: Vec<splat::Frame> = (0..protocol.desired.len())
+    let desired_images: Vec<splat::Frame> = (0..protocol.desired.len())
         .map(|k| Ok(renderer.render(&protocol.desired_pose(k)?)?))
         .collect::<anyhow::Result<_>>()?;
+
+    // Jobs: the runs of one pose, one per method, except that Rule1 and Rule2 with the
+    // same settings form one job, which runs their common step 1 once.
+    let shares_step1 = |m: usize| matches!(methods[m].method, Method::Rule1 | Method::Rule2);
+    let mut jobs: Vec<Vec<RunSpec>> = Vec::new();
+    for r in &runs {
+        let partner = jobs.iter_mut().rev().take(methods.len()).find(|job| {
+            let first = job[0];
+            (first.desired, first.initial) == (r.desired, r.initial)
+                && shares_step1(first.method)
+                && shares_step1(r.method)
+                && methods[first.method].config == methods[r.method].config
+        });
+        match partner {
+            Some(job) => job.push(*r),
+            None => jobs.push(vec![*r]),
+        }
+    }
+    // Runs in parallel, each image on one thread (unless there is a single job).
+    let parallel_images = jobs.len() < rayon::current_num_threads();
 
     let bar = ProgressBar::new(runs.len() as u64);
     bar.set_style(
@@ -92,54 +113,61 @@ pub fn run_protocol(
         .progress_chars("=> "),
     );
     let successes = Mutex::new(0usize);
-    let mut records: Vec<RunRecord> = runs
+    let records: Vec<Vec<RunRecord>> = jobs
         .par_iter()
         .map_init(
             || None::<(usize, Servo<'_>)>,
-            |servo_slot, spec| -> anyhow::Result<RunRecord> {
-                let method: &MethodConfig = &methods[spec.method];
-                // One optimiser per worker, rebuilt when the method's settings change.
-                if servo_slot.as_ref().is_none_or(|(m, _)| *m != spec.method) {
-                    *servo_slot = Some((
-                        spec.method,
-                        Servo::new(cloud, &camera, method.config.clone())?,
-                    ));
+            |servo_slot, job| -> anyhow::Result<Vec<RunRecord>> {
+                let first = &methods[job[0].method];
+                // One optimiser per worker, rebuilt when the settings change.
+                if servo_slot
+                    .as_ref()
+                    .is_none_or(|(m, _)| methods[*m].config != first.config)
+                {
+                    let config = VvsConfig {
+                        parallel: parallel_images,
+                        ..first.config.clone()
+                    };
+                    *servo_slot = Some((job[0].method, Servo::new(cloud, &camera, config)?));
                 }
                 let servo = &mut servo_slot.as_mut().expect("set above").1;
-                let desired_pose = protocol.desired_pose(spec.desired)?;
-                let initial = protocol.initial_pose(spec.desired, spec.initial)?;
-                let started = Instant::now();
-                let outcome = servo.run(method.method, &desired[spec.desired], initial)?;
-                let wall_time_s = started.elapsed().as_secs_f64();
-                let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);
-                let success = dt < protocol.success_threshold_m;
-                if success {
-                    *successes.lock().expect("not poisoned") += 1;
+                let (desired, initial) = (job[0].desired, job[0].initial);
+                let desired_pose = protocol.desired_pose(desired)?;
+                let initial_pose = protocol.initial_pose(desired, initial)?;
+                let job_methods: Vec<Method> =
+                    job.iter().map(|r| methods[r.method].method).collect();
+                let outcomes =
+                    servo.run_methods(&job_methods, &desired_images[desired], initial_pose)?;
+                let mut records = Vec::with_capacity(job.len());
+                for (spec, outcome) in job.iter().zip(outcomes) {
+                    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);
+                    let success = dt < protocol.success_threshold_m;
+                    records.push(RunRecord {
+                        run_id: spec.id,
+                        scene: scene_name.to_string(),
+                        desired,
+                        initial,
+                        method: methods[spec.method].name.clone(),
+                        final_position_error_m: dt,
+                        final_rotation_error_deg: dr.to_degrees(),
+                        iterations_step1: outcome.iterations[0],
+                        iterations_step2: outcome.iterations[1],
+                        stop: outcome.stop.name().to_string(),
+                        lambda: outcome.lambda,
+                        cost: outcome.cost,
+                        wall_time_s: outcome.time_s,
+                        success,
+                    });
                 }
-                bar.inc(1);
-                bar.set_message(format!(
-                    "{} successes",
-                    successes.lock().expect("not poisoned")
-                ));
-                Ok(RunRecord {
-                    run_id: spec.id,
-                    scene: scene_name.to_string(),
-                    desired: spec.desired,
-                    initial: spec.initial,
-                    method: method.name.clone(),
-                    final_position_error_m: dt,
-                    final_rotation_error_deg: dr.to_degrees(),
-                    iterations_step1: outcome.iterations[0],
-                    iterations_step2: outcome.iterations[1],
-                    stop: outcome.stop.name().to_string(),
-                    lambda: outcome.lambda,
-                    cost: outcome.cost,
-                    wall_time_s,
-                    success,
-                })
+                let mut successes = successes.lock().expect("not poisoned");
+                *successes += records.iter().filter(|r| r.success).count();
+                bar.inc(job.len() as u64);
+                bar.set_message(format!("{successes} successes"));
+                Ok(records)
             },
         )
         .collect::<anyhow::Result<_>>()?;
+    let mut records: Vec<RunRecord> = records.into_iter().flatten().collect();
     bar.finish();
     records.sort_by_key(|r| r.run_id);
     Ok(records)

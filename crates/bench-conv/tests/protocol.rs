@@ -114,6 +114,14 @@ fn shards_merge_to_the_single_run() {
             .unwrap()
         })
         .collect();
+    // A shard holds whole poses, each with every method (whatever the shard count's
+    // factors).
+    for (i, part) in parts.iter().enumerate() {
+        let methods: std::collections::BTreeSet<&str> =
+            part.iter().map(|r| r.method.as_str()).collect();
+        assert_eq!(methods.len(), 4, "shard {i}: {methods:?}");
+        assert_eq!(part.len() % 4, 0, "shard {i}");
+    }
     // Through CSV files, as on a cluster.
     let files: Vec<PathBuf> = parts
         .iter()

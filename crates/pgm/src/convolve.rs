@@ -3,8 +3,8 @@
 //! `out[x] = Σ_{k=−r..r} K[k + r] · in[x + k]`, the sum restricted to `0 ≤ x + k < n`
 //! (exact zero padding: pixels outside the image contribute nothing). Written as
 //! `axpy` loops over whole rows so that the compiler vectorises them. Rows (and
-//! output rows of the column pass) are independent: they are spread over rayon's
-//! threads, and the result does not depend on the thread count.
+//! output rows of the column pass) are independent: with `parallel`, they are spread
+//! over rayon's threads, and the result does not depend on the thread count.
 
 use rayon::prelude::*;
 
@@ -50,11 +50,17 @@ impl Kernels {
 
 /// Correlate every row of a `width × height` image with `kernel` (radius
 /// `(kernel.len() − 1)/2`).
-pub fn rows(src: &[f32], dst: &mut [f32], width: usize, kernel: &[f32]) {
-    src.par_chunks_exact(width)
-        .zip(dst.par_chunks_exact_mut(width))
-        .with_min_len(16)
-        .for_each(|(s, d)| row(s, d, width, kernel));
+pub fn rows(src: &[f32], dst: &mut [f32], width: usize, kernel: &[f32], parallel: bool) {
+    if parallel {
+        src.par_chunks_exact(width)
+            .zip(dst.par_chunks_exact_mut(width))
+            .with_min_len(16)
+            .for_each(|(s, d)| row(s, d, width, kernel));
+    } else {
+        for (s, d) in src.chunks_exact(width).zip(dst.chunks_exact_mut(width)) {
+            row(s, d, width, kernel);
+        }
+    }
 }
 
 fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32]) {
@@ -83,11 +89,12 @@ pub fn columns(
     height: usize,
     kernel: &[f32],
     out_rows: &[usize],
+    parallel: bool,
 ) {
     for &y in out_rows {
         dst[y * width..(y + 1) * width].fill(0.0);
     }
-    add_columns(src, dst, width, height, kernel, out_rows);
+    add_columns(src, dst, width, height, kernel, out_rows, parallel);
 }
 
 /// Add the column correlation of `src` with `kernel` to the rows `out_rows` of `dst`
@@ -99,21 +106,29 @@ pub fn add_columns(
     height: usize,
     kernel: &[f32],
     out_rows: &[usize],
+    parallel: bool,
 ) {
     let r = (kernel.len() - 1) / 2;
-    dst.par_chunks_exact_mut(width)
-        .enumerate()
-        .with_min_len(16)
-        .filter(|(y, _)| out_rows.binary_search(y).is_ok())
-        .for_each(|(y, d)| {
-            let k0 = r.saturating_sub(y);
-            let k1 = (kernel.len()).min(height + r - y);
-            for ki in k0..k1 {
-                let c = kernel[ki];
-                let yy = y + ki - r;
-                for (o, &i) in d.iter_mut().zip(&src[yy * width..(yy + 1) * width]) {
-                    *o += c * i;
-                }
+    let one = |(y, d): (usize, &mut [f32])| {
+        let k0 = r.saturating_sub(y);
+        let k1 = (kernel.len()).min(height + r - y);
+        for ki in k0..k1 {
+            let c = kernel[ki];
+            let yy = y + ki - r;
+            for (o, &i) in d.iter_mut().zip(&src[yy * width..(yy + 1) * width]) {
+                *o += c * i;
             }
-        });
+        }
+    };
+    if parallel {
+        dst.par_chunks_exact_mut(width)
+            .enumerate()
+            .with_min_len(16)
+            .filter(|(y, _)| out_rows.binary_search(y).is_ok())
+            .for_each(one);
+    } else {
+        for &y in out_rows {
+            one((y, &mut dst[y * width..(y + 1) * width]));
+        }
+    }
 }

@@ -47,6 +47,9 @@ pub struct PgmOptions {
     /// Centre and normalise the brightness (zero mean, unit norm over the valid
     /// pixels) before the transform, as the paper does for real images (§4).
     pub normalize: bool,
+    /// Spread the convolutions over rayon's threads (the result is the same either
+    /// way; turn it off when the caller already keeps every thread busy). Default true.
+    pub parallel: bool,
 }
 
 impl Default for PgmOptions {
@@ -55,6 +58,7 @@ impl Default for PgmOptions {
             kernel_radius_lambdas: 4.0,
             stride: 1,
             normalize: false,
+            parallel: true,
         }
     }
 }
@@ -160,7 +164,8 @@ impl Pgm {
         self.brightness.compute(frame)?;
         let k = self.kernels(lambda);
         let w = self.width;
-        convolve::rows(self.brightness.image(), &mut self.h_g, w, &k.g);
+        let par = self.options.parallel;
+        convolve::rows(self.brightness.image(), &mut self.h_g, w, &k.g, par);
         convolve::columns(
             &self.h_g,
             &mut self.out,
@@ -168,6 +173,7 @@ impl Pgm {
             self.height,
             &k.g,
             &self.sample_rows,
+            par,
         );
         for (v, &s) in self.values.iter_mut().zip(&self.samples) {
             *v = self.out[s as usize];
@@ -187,17 +193,34 @@ impl Pgm {
         self.brightness.compute(frame)?;
         let k = self.kernels(lambda);
         let (w, h) = (self.width, self.height);
+        let par = self.options.parallel;
         let image = self.brightness.image();
-        convolve::rows(image, &mut self.h_g, w, &k.g);
-        convolve::rows(image, &mut self.h_k2g, w, &k.k2g);
+        convolve::rows(image, &mut self.h_g, w, &k.g, par);
+        convolve::rows(image, &mut self.h_k2g, w, &k.k2g, par);
         // G.
-        convolve::columns(&self.h_g, &mut self.out, w, h, &k.g, &self.sample_rows);
+        convolve::columns(&self.h_g, &mut self.out, w, h, &k.g, &self.sample_rows, par);
         for (v, &s) in self.values.iter_mut().zip(&self.samples) {
             *v = self.out[s as usize];
         }
         // J_λ = (1/λ³) [ (k² g)_rows g_cols + g_rows (k² g)_cols ] ⊛ I.
-        convolve::columns(&self.h_k2g, &mut self.out, w, h, &k.g, &self.sample_rows);
-        convolve::add_columns(&self.h_g, &mut self.out, w, h, &k.k2g, &self.sample_rows);
+        convolve::columns(
+            &self.h_k2g,
+            &mut self.out,
+            w,
+            h,
+            &k.g,
+            &self.sample_rows,
+            par,
+        );
+        convolve::add_columns(
+            &self.h_g,
+            &mut self.out,
+            w,
+            h,
+            &k.k2g,
+            &self.sample_rows,
+            par,
+        );
         let inv_l3 = 1.0 / (lambda * lambda * lambda);
         for (j, &s) in self.j_lambda.iter_mut().zip(&self.samples) {
             *j = self.out[s as usize] * inv_l3;
@@ -213,8 +236,16 @@ impl Pgm {
                     {
                         *p = row[c];
                     }
-                    convolve::rows(&self.plane, &mut self.out2, w, &k.g);
-                    convolve::columns(&self.out2, &mut self.out, w, h, &k.g, &self.sample_rows);
+                    convolve::rows(&self.plane, &mut self.out2, w, &k.g, par);
+                    convolve::columns(
+                        &self.out2,
+                        &mut self.out,
+                        w,
+                        h,
+                        &k.g,
+                        &self.sample_rows,
+                        par,
+                    );
                     for (l, &s) in self.interaction.iter_mut().zip(&self.samples) {
                         l[c] = self.out[s as usize];
                     }
@@ -223,9 +254,25 @@ impl Pgm {
             }
             PgmJacobian::Paper { edge_margin } => {
                 // ∇G at the samples: ∂G/∂u = (dg rows, g cols), ∂G/∂v = (g rows, dg cols).
-                convolve::rows(image, &mut self.h_dg, w, &k.dg);
-                convolve::columns(&self.h_dg, &mut self.out, w, h, &k.g, &self.sample_rows);
-                convolve::columns(&self.h_g, &mut self.out2, w, h, &k.dg, &self.sample_rows);
+                convolve::rows(image, &mut self.h_dg, w, &k.dg, par);
+                convolve::columns(
+                    &self.h_dg,
+                    &mut self.out,
+                    w,
+                    h,
+                    &k.g,
+                    &self.sample_rows,
+                    par,
+                );
+                convolve::columns(
+                    &self.h_g,
+                    &mut self.out2,
+                    w,
+                    h,
+                    &k.dg,
+                    &self.sample_rows,
+                    par,
+                );
                 let factors = self.brightness.grid().factors();
                 let inverse_range = self.brightness.inverse_range();
                 for ((l, &s), wgt) in self

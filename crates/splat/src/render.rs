@@ -21,7 +21,13 @@
 //!
 //! **Culling and level of detail.** Cells of the cloud entirely outside the camera's
 //! field (the range of angles off the optical axis that its valid pixels see) are
-//! skipped. Where a cell's points would be denser than `lod_spacing_px` on the image,
+//! skipped. The others are drawn front to back in batches; between batches, a cell
+//! whose every possibly covered pixel (a conservative image rectangle of its bounding
+//! sphere, splats included) already holds a range nearer than the cell's nearest point
+//! by more than the depth band is skipped (**occlusion culling**). The test is
+//! conservative: such a cell could neither lower a depth nor add a sample, so the image
+//! is exactly the one drawn without it (tested), and the batches are tested one after
+//! the other so that what is skipped does not depend on the thread count either. Where a cell's points would be denser than `lod_spacing_px` on the image,
 //! only a prefix of the cell (a uniform random subsample, see [`crate::PointCloud`]) is
 //! drawn, with proportionally larger splats. The subsample size varies with the pose
 //! one point at a time, so the rendering stays (almost) continuous in the pose.
@@ -63,6 +69,10 @@ pub struct RenderOptions {
     /// of its 8 neighbours hit takes their mean intensity and nearest range (the gaps a
     /// random subsample or a jittered sampling leaves). Default true.
     pub fill_holes: bool,
+    /// Skip cells hidden behind what is already drawn (exact: the image is the same
+    /// with or without it; only the time changes). Cameras with lens distortion are
+    /// never culled this way. Default true.
+    pub occlusion_culling: bool,
 }
 
 impl Default for RenderOptions {
@@ -75,6 +85,7 @@ impl Default for RenderOptions {
             max_splat_radius_px: 8,
             parallel: true,
             fill_holes: true,
+            occlusion_culling: true,
         }
     }
 }
@@ -112,9 +123,11 @@ impl RenderOptions {
 /// What one rendering did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RenderStats {
-    /// Cells that passed culling.
+    /// Cells drawn (in the field of view and not occluded).
     pub cells_drawn: usize,
-    /// Points drawn (after level of detail).
+    /// Cells in the field of view skipped as occluded.
+    pub cells_occluded: usize,
+    /// Points drawn (after culling and level of detail).
     pub points_drawn: usize,
     /// Pixels with a rendered point.
     pub pixels_hit: usize,
@@ -126,6 +139,23 @@ struct DrawCell {
     count: u32,
     spacing_m: f32,
 }
+
+/// A cell in the field of view, before the occlusion test.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    cell: DrawCell,
+    /// Centre in the camera frame.
+    center: Vec3,
+    /// Bounding radius, metres.
+    radius: f32,
+    /// Lower bound of the range of its points, metres (the drawing order).
+    nearest_m: f32,
+}
+
+/// Edge of the square tiles of the occlusion test, pixels.
+const TILE: usize = 8;
+/// The first batch of points drawn before any occlusion test, and the smallest batch.
+const MIN_BATCH_POINTS: usize = 16_384;
 
 /// The per-point constants of a rendering.
 #[derive(Clone, Copy)]
@@ -156,9 +186,16 @@ pub struct Renderer {
     /// Per pixel: `(Σ intensity << 24) | count` and `Σ range`, fixed point,
     /// interleaved so that pass 2 touches one cache line per pixel.
     accum: Vec<[AtomicU64; 2]>,
+    candidates: Vec<Candidate>,
     draw: Vec<DrawCell>,
     splats: Vec<Splat>,
     status: Vec<PixelStatus>,
+    /// Per pixel: all ones where valid, zero where masked (masked pixels never keep a
+    /// cell from being culled).
+    valid_bits: Vec<u32>,
+    /// Per tile: the largest depth key of its valid pixels (0 if it has none).
+    tiles: Vec<u32>,
+    tiles_x: usize,
     theta_min: f32,
     theta_max: f32,
 }
@@ -202,6 +239,13 @@ impl Renderer {
         } else {
             (0.0, std::f32::consts::PI)
         };
+        let valid_bits = camera
+            .valid_pixels()
+            .iter()
+            .map(|&v| if v { u32::MAX } else { 0 })
+            .collect();
+        let tiles_x = (camera.width() as usize).div_ceil(TILE);
+        let tiles_y = (camera.height() as usize).div_ceil(TILE);
         Ok(Self {
             camera,
             options,
@@ -209,9 +253,13 @@ impl Renderer {
             accum: (0..n)
                 .map(|_| [AtomicU64::new(0), AtomicU64::new(0)])
                 .collect(),
+            candidates: Vec::new(),
             draw: Vec::new(),
             splats: Vec::new(),
             status: vec![PixelStatus::Sky; n],
+            valid_bits,
+            tiles: vec![0; tiles_x * tiles_y],
+            tiles_x,
             theta_min,
             theta_max,
         })
@@ -279,7 +327,7 @@ impl Renderer {
         };
 
         self.select_cells(cloud, &view);
-        let points_drawn: usize = self.draw.iter().map(|c| c.count as usize).sum();
+        let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
 
         for d in &self.depth {
             d.store(EMPTY, Ordering::Relaxed);
@@ -289,40 +337,50 @@ impl Renderer {
             b.store(0, Ordering::Relaxed);
         }
         let parallel = self.options.parallel && rayon::current_num_threads() > 1;
-        let points = cloud.points();
-        let camera = &self.camera;
-        let depth = &self.depth[..];
-        let accum = &self.accum[..];
-        self.splats.resize(points_drawn, Splat::default());
-        if parallel {
-            // Chunks of cells of similar work, each with its own run of splat slots;
-            // atomics make the result independent of the order.
-            let chunks = chunk_cells(&self.draw, 16_384);
-            let mut slices = Vec::with_capacity(chunks.len());
-            let mut rest = &mut self.splats[..];
-            for cells in &chunks {
-                let n: usize = cells.iter().map(|c| c.count as usize).sum();
-                let (head, tail) = rest.split_at_mut(n);
-                slices.push((*cells, head));
-                rest = tail;
+        let occlusion = self.options.occlusion_culling && view.undistorted;
+        self.splats.resize(candidate_points, Splat::default());
+        self.draw.clear();
+        let mut points_drawn = 0;
+        let mut cells_occluded = 0;
+        let mut next = 0;
+        while next < self.candidates.len() {
+            // The next batch, front to back, tested against what is drawn so far.
+            let target = MIN_BATCH_POINTS.max(points_drawn / 2);
+            let first = self.draw.len();
+            let mut batch_points = 0;
+            while next < self.candidates.len() && batch_points < target {
+                let candidate = self.candidates[next];
+                next += 1;
+                if occlusion && points_drawn > 0 && self.occluded(&candidate, &view) {
+                    cells_occluded += 1;
+                    continue;
+                }
+                self.draw.push(candidate.cell);
+                batch_points += candidate.cell.count as usize;
             }
-            slices.par_iter_mut().for_each(|(cells, splats)| {
-                project_and_depth(points, cells, &view, camera, depth, splats, true);
-            });
-            self.splats
-                .par_chunks(16_384)
-                .for_each(|splats| accumulate(splats, &view, depth, accum, true));
-        } else {
-            project_and_depth(
-                points,
-                &self.draw,
+            let cells = &self.draw[first..];
+            let splats = &mut self.splats[points_drawn..points_drawn + batch_points];
+            draw_depth(
+                cloud.points(),
+                cells,
                 &view,
-                camera,
-                depth,
-                &mut self.splats,
-                false,
+                &self.camera,
+                &self.depth,
+                splats,
+                parallel,
             );
-            accumulate(&self.splats, &view, depth, accum, false);
+            points_drawn += batch_points;
+            if occlusion && next < self.candidates.len() {
+                self.update_tiles();
+            }
+        }
+        let splats = &self.splats[..points_drawn];
+        if parallel {
+            splats
+                .par_chunks(16_384)
+                .for_each(|splats| accumulate(splats, &view, &self.depth, &self.accum, true));
+        } else {
+            accumulate(splats, &view, &self.depth, &self.accum, false);
         }
 
         // Resolve.
@@ -356,6 +414,7 @@ impl Renderer {
         }
         Ok(RenderStats {
             cells_drawn: self.draw.len(),
+            cells_occluded,
             points_drawn,
             pixels_hit,
         })
@@ -398,9 +457,10 @@ impl Renderer {
         filled
     }
 
-    /// Culling and level of detail: fill `self.draw`.
+    /// Field-of-view culling and level of detail: fill `self.candidates`, nearest
+    /// first.
     fn select_cells(&mut self, cloud: &PointCloud, view: &View) {
-        self.draw.clear();
+        self.candidates.clear();
         let spacing = cloud.spacing_m();
         let lod = self.options.lod_spacing_px;
         for cell in cloud.cells() {
@@ -430,13 +490,207 @@ impl Renderer {
                     spacing_m = spacing * (cell.len as f32 / count as f32).sqrt();
                 }
             }
-            self.draw.push(DrawCell {
-                start: cell.start,
-                count,
-                spacing_m,
+            self.candidates.push(Candidate {
+                cell: DrawCell {
+                    start: cell.start,
+                    count,
+                    spacing_m,
+                },
+                center: c,
+                radius: cell.radius,
+                nearest_m: (d - cell.radius).max(0.0),
             });
         }
+        // Front to back; ties by position in the cloud, so the order is total.
+        self.candidates.sort_unstable_by(|a, b| {
+            a.nearest_m
+                .total_cmp(&b.nearest_m)
+                .then(a.cell.start.cmp(&b.cell.start))
+        });
     }
+
+    /// Recompute the largest depth key of every tile's valid pixels.
+    fn update_tiles(&mut self) {
+        let w = self.camera.width() as usize;
+        let h = self.camera.height() as usize;
+        self.tiles.fill(0);
+        for row in 0..h {
+            let tile_row = &mut self.tiles[(row / TILE) * self.tiles_x..][..self.tiles_x];
+            let depth = &self.depth[row * w..(row + 1) * w];
+            let valid = &self.valid_bits[row * w..(row + 1) * w];
+            for ((tile, depth), valid) in tile_row
+                .iter_mut()
+                .zip(depth.chunks(TILE))
+                .zip(valid.chunks(TILE))
+            {
+                let row_max = depth
+                    .iter()
+                    .zip(valid)
+                    .map(|(d, v)| d.load(Ordering::Relaxed) & v)
+                    .max()
+                    .unwrap_or(0);
+                *tile = (*tile).max(row_max);
+            }
+        }
+    }
+
+    /// Whether every pixel that a point of `candidate` could cover already holds a
+    /// range nearer than the cell by more than the depth band (then the cell can
+    /// change nothing). Conservative: `false` whenever in doubt.
+    fn occluded(&self, candidate: &Candidate, view: &View) -> bool {
+        let Some([u0, u1, v0, v1]) = self.image_rect(candidate, view) else {
+            return false;
+        };
+        if u0 > u1 || v0 > v1 {
+            return true; // entirely outside the image: nothing would be drawn
+        }
+        let w = self.camera.width() as usize;
+        let mut farthest = 0u32;
+        for row in v0..=v1 {
+            let depth = &self.depth[row * w + u0..=row * w + u1];
+            let valid = &self.valid_bits[row * w + u0..=row * w + u1];
+            for (d, v) in depth.iter().zip(valid) {
+                farthest = farthest.max(d.load(Ordering::Relaxed) & v);
+            }
+            if farthest == EMPTY {
+                return false;
+            }
+        }
+        if farthest == EMPTY {
+            return false;
+        }
+        // Margins cover the f32 rounding of the points' ranges and of the band test.
+        let nearest = candidate.nearest_m * (1.0 - 1e-4) - 1e-3;
+        f32::from_bits(farthest) * (1.0 + view.depth_band) * (1.0 + 1e-4) < nearest
+    }
+
+    /// A pixel rectangle `[u0, u1, v0, v1]` (inclusive, clipped to the image; empty if
+    /// outside it) holding every pixel that a splat of a point of the candidate's
+    /// bounding sphere can cover, or `None` if it cannot be bounded (the sphere holds
+    /// the centre, or reaches the edge of the model's domain).
+    ///
+    /// The UCM maps a direction at angle `θ` off the axis and azimuth `φ` to the
+    /// normalised point `r(θ) (cos φ, sin φ)` with `r(θ) = sin θ / (cos θ + ξ)`,
+    /// increasing over the drawable domain; the sphere's directions form a cone of
+    /// half-angle `β = asin(R/d)`, hence `θ ∈ [θc − β, θc + β]` and
+    /// `|φ − φc| ≤ asin(sin β / sin θc)`: an annular sector, whose bounding box the
+    /// affine intrinsics map to the image.
+    fn image_rect(&self, candidate: &Candidate, view: &View) -> Option<[usize; 4]> {
+        let c = candidate.center;
+        let d = c.length();
+        if !(d > candidate.radius * 1.01 + 1e-3) {
+            return None;
+        }
+        let xi = view.xi;
+        let theta_c = (c.z / d).clamp(-1.0, 1.0).acos();
+        let beta = (candidate.radius / d).asin() * 1.001 + 1e-4;
+        let theta_hi = theta_c + beta;
+        // The domain's edge: cos θ + ξ > 0 (ξ ≤ 1), or 1 + ξ cos θ > 0 (ξ > 1).
+        let cos_limit = if xi > 1.0 { -1.0 / xi } else { -xi };
+        if theta_hi >= std::f32::consts::PI || theta_hi.cos() <= cos_limit + 1e-3 {
+            return None;
+        }
+        let r = |theta: f32| theta.sin() / (theta.cos() + xi);
+        let r_hi = r(theta_hi);
+        let (mut x0, mut x1, mut y0, mut y1);
+        if theta_c <= beta {
+            // The cone holds the axis: a disc.
+            (x0, x1, y0, y1) = (-r_hi, r_hi, -r_hi, r_hi);
+        } else {
+            let r_lo = r(theta_c - beta).max(0.0);
+            let phi_c = c.y.atan2(c.x);
+            let dphi = (beta.sin() / theta_c.sin()).min(1.0).asin();
+            let (a0, a1) = (phi_c - dphi, phi_c + dphi);
+            (x0, x1, y0, y1) = (
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+            );
+            let mut include = |x: f32, y: f32| {
+                x0 = x0.min(x);
+                x1 = x1.max(x);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            };
+            for a in [a0, a1] {
+                let (sin, cos) = a.sin_cos();
+                include(r_lo * cos, r_lo * sin);
+                include(r_hi * cos, r_hi * sin);
+            }
+            // Axis directions inside the angular range reach the outer radius.
+            for k in -4..=4 {
+                let a = k as f32 * std::f32::consts::FRAC_PI_2;
+                if a > a0 && a < a1 {
+                    let (sin, cos) = a.sin_cos();
+                    include(r_hi * cos, r_hi * sin);
+                }
+            }
+        }
+        // Image of the box under the affine intrinsics.
+        let mut u_lo = f32::INFINITY;
+        let mut u_hi = f32::NEG_INFINITY;
+        for (x, y) in [(x0, y0), (x0, y1), (x1, y0), (x1, y1)] {
+            let u = view.alpha_u * x + view.skew * y + view.u0;
+            u_lo = u_lo.min(u);
+            u_hi = u_hi.max(u);
+        }
+        let v_lo = view.alpha_v * y0 + view.v0;
+        let v_hi = view.alpha_v * y1 + view.v0;
+        // Splat half-width: size = spacing · scale · M(θ) / ρ, M increasing in θ for
+        // ξ ≤ 1 (see `magnification`); the largest allowed otherwise.
+        let half = if xi <= 1.0 {
+            let size = candidate.cell.spacing_m * view.splat_scale * self.magnification(theta_hi)
+                / (d - candidate.radius).max(1e-3);
+            (size * 0.5 + 1.0).min(view.max_radius as f32)
+        } else {
+            view.max_radius as f32
+        };
+        let pad = half + 2.0;
+        let (w, h) = (view.width as f32, view.height as f32);
+        let clip = |lo: f32, hi: f32, n: f32| -> (usize, usize) {
+            let lo = (lo - pad).floor().max(0.0);
+            let hi = (hi + pad).ceil().min(n - 1.0);
+            if lo > hi || !lo.is_finite() || !hi.is_finite() {
+                (1, 0)
+            } else {
+                (lo as usize, hi as usize)
+            }
+        };
+        let (u0, u1) = clip(u_lo, u_hi, w);
+        let (v0, v1) = clip(v_lo, v_hi, h);
+        Some([u0, u1, v0, v1])
+    }
+}
+
+/// Pass 1 over a batch of cells, on rayon's threads if `parallel`: chunks of cells of
+/// similar work, each with its own run of splat slots; atomics make the result
+/// independent of the order.
+fn draw_depth(
+    points: &[[f32; 4]],
+    cells: &[DrawCell],
+    view: &View,
+    camera: &Camera,
+    depth: &[AtomicU32],
+    splats: &mut [Splat],
+    parallel: bool,
+) {
+    if !parallel {
+        project_and_depth(points, cells, view, camera, depth, splats, false);
+        return;
+    }
+    let chunks = chunk_cells(cells, 16_384);
+    let mut slices = Vec::with_capacity(chunks.len());
+    let mut rest = splats;
+    for cells in &chunks {
+        let n: usize = cells.iter().map(|c| c.count as usize).sum();
+        let (head, tail) = rest.split_at_mut(n);
+        slices.push((*cells, head));
+        rest = tail;
+    }
+    slices.par_iter_mut().for_each(|(cells, splats)| {
+        project_and_depth(points, cells, view, camera, depth, splats, true);
+    });
 }
 
 /// A projected point, written by pass 1 and read by pass 2 (12 bytes).

@@ -441,3 +441,103 @@ fn downsampled_frame_averages_blocks() {
         Err(SplatError::FrameSize { .. })
     ));
 }
+
+mod occlusion {
+    use proptest::prelude::*;
+    use ucm::{Camera, Intrinsics, ValidRegion};
+
+    use super::*;
+
+    /// A camera with random intrinsics (skew, unequal focal lengths, ξ on both sides
+    /// of 1), the whole image valid.
+    fn camera(alpha_u: f64, aspect: f64, skew: f64, xi: f64, shift: f64) -> Camera {
+        Camera::new(
+            Intrinsics {
+                alpha_u,
+                alpha_v: alpha_u * aspect,
+                u0: 159.5 + shift,
+                v0: 119.5 - shift,
+                xi,
+                skew,
+            },
+            None,
+            320,
+            240,
+            ValidRegion::Full,
+        )
+        .unwrap()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+
+        /// Occlusion culling skips only what cannot change the image: the frame is the
+        /// same, bit for bit, with and without it, for random street poses (tilted,
+        /// at any height) and random intrinsics.
+        #[test]
+        fn culling_changes_nothing_in_the_image(
+            along in -55.0f64..55.0,
+            across in -3.0f64..3.0,
+            height in 0.8f64..8.0,
+            heading in 0.0f64..std::f64::consts::TAU,
+            tilt in prop::array::uniform3(-0.4f64..0.4),
+            y_street in any::<bool>(),
+            alpha_u in 30.0f64..90.0,
+            aspect in 0.9f64..1.1,
+            skew in -2.0f64..2.0,
+            xi in 0.3f64..1.4,
+            shift in -10.0f64..10.0,
+        ) {
+            let camera = camera(alpha_u, aspect, skew, xi, shift);
+            let position = if y_street {
+                DVec3::new(across, along, height)
+            } else {
+                DVec3::new(along, across, height)
+            };
+            let tilt = Isometry3::from_pose_vector([0.0, 0.0, 0.0, tilt[0], tilt[1], tilt[2]])
+                .unwrap();
+            let pose = camera_looking_down(position, heading) * tilt;
+            let options = RenderOptions { parallel: false, ..RenderOptions::default() };
+            let culled = render_city(&camera, &pose, options);
+            let all = render_city(
+                &camera,
+                &pose,
+                RenderOptions { occlusion_culling: false, ..options },
+            );
+            prop_assert!(culled.bitwise_eq(&all));
+        }
+    }
+
+    /// In a street, most cells in the field of view are hidden by the facades, and the
+    /// statistics say so.
+    #[test]
+    fn culling_skips_hidden_cells_in_a_street() {
+        let camera = fixture("omni-320x240.toml");
+        let pose = camera_looking_down(DVec3::new(-28.0, 2.5, 4.5), 0.0).inverse();
+        let mut frame = Frame::for_camera(&camera);
+        let mut stats = Vec::new();
+        for occlusion_culling in [false, true] {
+            let options = RenderOptions {
+                occlusion_culling,
+                ..RenderOptions::default()
+            };
+            let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+            stats.push(
+                renderer
+                    .render(&default_city().cloud, &pose, &mut frame)
+                    .unwrap(),
+            );
+        }
+        assert_eq!(stats[0].cells_occluded, 0);
+        assert_eq!(
+            stats[0].cells_drawn,
+            stats[1].cells_drawn + stats[1].cells_occluded
+        );
+        assert!(
+            stats[1].cells_occluded * 3 > stats[0].cells_drawn,
+            "{stats:?}"
+        );
+        assert!(stats[1].points_drawn < stats[0].points_drawn);
+        assert_eq!(stats[0].pixels_hit, stats[1].pixels_hit);
+    }
+}

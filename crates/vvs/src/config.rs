@@ -140,6 +140,10 @@ pub struct VvsConfig {
     pub lod_spacing_px: Option<f32>,
     /// Keep the per-iteration history in the outcome.
     pub keep_history: bool,
+    /// Render and transform each image on rayon's threads. The results are the same
+    /// either way; turn it off when the caller already keeps every thread busy with
+    /// runs of its own (as `bench-conv` does).
+    pub parallel: bool,
 }
 
 impl Default for VvsConfig {
@@ -167,6 +171,7 @@ impl Default for VvsConfig {
             pgm_stride: 1,
             lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
             keep_history: true,
+            parallel: true,
         }
     }
 }

@@ -86,4 +86,7 @@ pub struct Outcome {
     pub iterations: [usize; 2],
     /// Per-iteration history (empty if not kept).
     pub history: Vec<IterationRecord>,
+    /// Time spent in the stages, seconds (a step 1 shared by
+    /// [`crate::Servo::run_methods`] counts in full for every method sharing it).
+    pub time_s: f64,
 }

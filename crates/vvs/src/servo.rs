@@ -14,7 +14,7 @@ use crate::{
 };
 
 /// One stage of a method.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Stage {
     Brightness,
     Pgm {
@@ -25,7 +25,7 @@ enum Stage {
 }
 
 /// A stage with its step (1 or 2), pyramid level and iteration cap.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Planned {
     stage: Stage,
     step: u8,
@@ -50,6 +50,7 @@ impl Level {
     fn new(camera: Camera, config: &VvsConfig) -> Result<Self, VvsError> {
         let options = RenderOptions {
             lod_spacing_px: config.lod_spacing_px,
+            parallel: config.parallel,
             ..RenderOptions::default()
         };
         Ok(Self {
@@ -60,6 +61,7 @@ impl Level {
                 PgmOptions {
                     stride: config.pgm_stride,
                     normalize: config.normalize,
+                    parallel: config.parallel,
                     ..PgmOptions::default()
                 },
             )?,
@@ -208,6 +210,20 @@ impl<'a> Servo<'a> {
         desired: &Frame,
         initial: Isometry3,
     ) -> Result<Outcome, VvsError> {
+        let mut outcomes = self.run_methods(&[method], desired, initial)?;
+        Ok(outcomes.pop().expect("one outcome per method"))
+    }
+
+    /// Align with several methods from the same `initial` pose: one outcome per method,
+    /// each exactly what [`Servo::run`] returns for it. Methods whose step 1 is the same
+    /// (Rule1 and Rule2) run it once: step 2 of each starts from the shared result,
+    /// and each outcome's `time_s` counts the shared step in full.
+    pub fn run_methods(
+        &mut self,
+        methods: &[Method],
+        desired: &Frame,
+        initial: Isometry3,
+    ) -> Result<Vec<Outcome>, VvsError> {
         if desired.width() != self.camera.width() || desired.height() != self.camera.height() {
             return Err(VvsError::DesiredSize {
                 got_width: desired.width(),
@@ -220,37 +236,77 @@ impl<'a> Servo<'a> {
             return Err(VvsError::NonFinitePose);
         }
         let rule0_start = self.config.rule0_lambda_factor * self.config.lambda_star_step1;
-        if method == Method::Rule0 && !pgm::LAMBDA_RANGE.contains(&rule0_start) {
+        if methods.contains(&Method::Rule0) && !pgm::LAMBDA_RANGE.contains(&rule0_start) {
             return Err(VvsError::Config {
                 name: "rule0_lambda_factor",
                 message: format!("Rule0 would start at λ = {rule0_start} px, outside [0.5, 40]"),
             });
         }
-        let mut pose = initial;
-        let mut lambda = 0.0f32;
-        let mut cost = f64::NAN;
-        let mut history = Vec::new();
-        let mut iterations = [0usize; 2];
-        let mut stop = StopReason::IterationBudget;
-        let stages = self.stages(method);
         // The desired image at each pyramid level.
         let mut coarse_desired = Vec::with_capacity(self.levels.len() - 1);
         for level in &self.levels[1..] {
             let factor = self.camera.width() / level.camera.width();
             coarse_desired.push(desired.downsampled(factor, &level.camera)?);
         }
-        let budgets = [
-            self.config.step1_max_iterations,
-            self.config.max_iterations - self.config.step1_max_iterations,
-        ];
-        let budgets = if method == Method::Povs {
-            [self.config.max_iterations, 0]
-        } else {
-            budgets
-        };
-        for planned in &stages {
+        let mut step1_done: Vec<(Vec<Planned>, Outcome)> = Vec::new();
+        let mut outcomes = Vec::with_capacity(methods.len());
+        for &method in methods {
+            let stages = self.stages(method);
+            let budgets = if method == Method::Povs {
+                [self.config.max_iterations, 0]
+            } else {
+                [
+                    self.config.step1_max_iterations,
+                    self.config.max_iterations - self.config.step1_max_iterations,
+                ]
+            };
+            let split = stages
+                .iter()
+                .position(|p| p.step == 2)
+                .unwrap_or(stages.len());
+            let (step1, step2) = stages.split_at(split);
+            let after_step1 = match step1_done.iter().find(|(plan, _)| plan == step1) {
+                Some((_, outcome)) => outcome.clone(),
+                None => {
+                    let start = Outcome {
+                        world_from_camera: initial,
+                        lambda: 0.0,
+                        cost: f64::NAN,
+                        stop: StopReason::IterationBudget,
+                        iterations: [0; 2],
+                        history: Vec::new(),
+                        time_s: 0.0,
+                    };
+                    let outcome =
+                        self.run_stages(step1, budgets, desired, &coarse_desired, start)?;
+                    step1_done.push((step1.to_vec(), outcome.clone()));
+                    outcome
+                }
+            };
+            let outcome = if matches!(after_step1.stop, StopReason::Diverged(_)) {
+                after_step1
+            } else {
+                self.run_stages(step2, budgets, desired, &coarse_desired, after_step1)?
+            };
+            outcomes.push(outcome);
+        }
+        Ok(outcomes)
+    }
+
+    /// Run `stages` from the state in `outcome` (pose, iterations so far), stopping at
+    /// the first divergence.
+    fn run_stages(
+        &mut self,
+        stages: &[Planned],
+        budgets: [usize; 2],
+        desired: &Frame,
+        coarse_desired: &[Frame],
+        mut outcome: Outcome,
+    ) -> Result<Outcome, VvsError> {
+        for planned in stages {
+            let started = Instant::now();
             let step = usize::from(planned.step - 1);
-            let left = budgets[step] - iterations[step];
+            let left = budgets[step] - outcome.iterations[step];
             let budget = if planned.last_of_step {
                 left
             } else {
@@ -260,24 +316,23 @@ impl<'a> Servo<'a> {
                 0 => desired,
                 k => &coarse_desired[k - 1],
             };
-            let (result, stage_lambda, stage_cost, count) =
-                self.run_stage(*planned, budget, level_desired, &mut pose, &mut history)?;
-            iterations[step] += count;
-            lambda = stage_lambda;
-            cost = stage_cost;
-            stop = result;
+            let (result, stage_lambda, stage_cost, count) = self.run_stage(
+                *planned,
+                budget,
+                level_desired,
+                &mut outcome.world_from_camera,
+                &mut outcome.history,
+            )?;
+            outcome.iterations[step] += count;
+            outcome.lambda = stage_lambda;
+            outcome.cost = stage_cost;
+            outcome.stop = result;
+            outcome.time_s += started.elapsed().as_secs_f64();
             if let StopReason::Diverged(_) = result {
                 break;
             }
         }
-        Ok(Outcome {
-            world_from_camera: pose,
-            lambda,
-            cost,
-            stop,
-            iterations,
-            history,
-        })
+        Ok(outcome)
     }
 
     /// One stage: returns why it stopped, the final λ and cost, and its iteration count.

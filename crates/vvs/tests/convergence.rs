@@ -202,3 +202,52 @@ fn pyramid_and_lambda_schedule_run_their_stages_and_converge() {
         dr.to_degrees()
     );
 }
+
+/// Running several methods at once (Rule1 and Rule2 sharing step 1) gives each one
+/// exactly what running it alone gives, and sequential images match parallel ones.
+#[test]
+fn run_methods_shares_step1_without_changing_any_outcome() {
+    let camera = fixture();
+    let config = VvsConfig {
+        step1_max_iterations: 12,
+        max_iterations: 20,
+        ..VvsConfig::default()
+    };
+    let start = offset([0.8, -0.3, 0.1, 0.02, 0.0, 0.1]);
+    let methods = [Method::Rule1, Method::Povs, Method::Rule2, Method::Rule0];
+    let mut servo = Servo::new(&city().cloud, &camera, config.clone()).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    let together = servo.run_methods(&methods, &desired, start).unwrap();
+    let mut sequential = Servo::new(
+        &city().cloud,
+        &camera,
+        VvsConfig {
+            parallel: false,
+            ..config
+        },
+    )
+    .unwrap();
+    let strip = |o: &vvs::Outcome| {
+        (
+            o.world_from_camera,
+            o.lambda.to_bits(),
+            o.cost.to_bits(),
+            o.stop,
+            o.iterations,
+            o.history
+                .iter()
+                .map(|r| (r.stage, r.pose, r.lambda.to_bits(), r.cost.to_bits()))
+                .collect::<Vec<_>>(),
+        )
+    };
+    for (method, shared) in methods.iter().zip(&together) {
+        let alone = sequential.run(*method, &desired, start).unwrap();
+        assert_eq!(strip(shared), strip(&alone), "{method:?}");
+        assert!(shared.time_s > 0.0);
+    }
+    // Rule1 and Rule2 did share their step 1.
+    assert_eq!(
+        together[0].history[..together[0].iterations[0]],
+        together[2].history[..together[2].iterations[0]]
+    );
+}

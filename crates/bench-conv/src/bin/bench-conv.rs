@@ -24,7 +24,7 @@ enum Command {
         /// Results folder (created).
         #[arg(long)]
         out: PathBuf,
-        /// Run shard i of n only (i/n): run ids congruent to i modulo n.
+        /// Run shard i of n only (i/n): every method from the poses k ≡ i (mod n), poses numbered desired-major.
         #[arg(long)]
         shard: Option<String>,
         /// Also run the protocol's extra methods ([[variant]]: LM, robust weighting…).
