@@ -21,6 +21,7 @@
 //!   plots, and the superimpositions of the paper's Fig. 4d–e.
 #![deny(missing_docs)]
 
+pub mod progress;
 pub mod protocol;
 pub mod real_image;
 pub mod report;

@@ -4,11 +4,11 @@
 use std::sync::Mutex;
 
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use splat::PointCloud;
 use vvs::{Method, Servo, VvsConfig};
 
+use crate::progress::Progress;
 use crate::protocol::{Protocol, RunSpec};
 use crate::report::RunRecord;
 
@@ -104,14 +104,7 @@ pub fn run_protocol(
     // Runs in parallel, each image on one thread (unless there is a single job).
     let parallel_images = jobs.len() < rayon::current_num_threads();
 
-    let bar = ProgressBar::new(runs.len() as u64);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} runs, ETA {eta} {msg}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
+    let bar = Progress::new(runs.len() as u64, "runs");
     let successes = Mutex::new(0usize);
     let records: Vec<Vec<RunRecord>> = jobs
         .par_iter()
@@ -161,8 +154,7 @@ pub fn run_protocol(
                 }
                 let mut successes = successes.lock().expect("not poisoned");
                 *successes += records.iter().filter(|r| r.success).count();
-                bar.inc(job.len() as u64);
-                bar.set_message(format!("{successes} successes"));
+                bar.inc(job.len() as u64, &format!("{successes} successes"));
                 Ok(records)
             },
         )

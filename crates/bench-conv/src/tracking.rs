@@ -29,17 +29,16 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{Context, bail, ensure};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Deserialize;
 use splat::{Frame, PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 use vvs::{Method, Servo, StopReason, VvsConfig};
 
+use crate::progress::Progress;
 use crate::protocol::Scene;
 use crate::sequence::{Acquisition, Trajectory};
 
@@ -330,26 +329,23 @@ pub fn run_sequence(
         .iter()
         .map(|&(_, n)| truth.len().div_ceil(n) as u64)
         .sum();
-    let bar = ProgressBar::new(total_frames);
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames, ETA {eta}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let bar = Mutex::new(bar);
+    let bar = Progress::new(total_frames, "frames");
+    // Tracks in parallel, each image on one thread (unless there are fewer tracks than
+    // threads).
+    let config = VvsConfig {
+        parallel: jobs.len() < rayon::current_num_threads(),
+        ..config
+    };
     let outputs: Vec<anyhow::Result<(Vec<FrameRecord>, bool)>> = jobs
         .par_iter()
         .map(|&(method, n)| {
             let mut servo = Servo::new(cloud, camera, config.clone())?;
             let (records, lost) = track(&mut servo, method, n, spec, &truth, &acquired)?;
-            if let Ok(b) = bar.lock() {
-                b.inc(truth.len().div_ceil(n) as u64);
-            }
+            bar.inc(truth.len().div_ceil(n) as u64, "");
             Ok((records, lost))
         })
         .collect();
-    if let Ok(b) = bar.lock() {
-        b.finish_and_clear();
-    }
+    bar.finish();
     let mut records = Vec::new();
     let mut lost = Vec::new();
     for (&(method, n), output) in jobs.iter().zip(outputs) {

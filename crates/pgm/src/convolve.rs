@@ -48,28 +48,48 @@ impl Kernels {
     }
 }
 
+/// Columns `[start, end)` of one image row.
+pub type Span = [usize; 2];
+
 /// Correlate every row of a `width × height` image with `kernel` (radius
-/// `(kernel.len() − 1)/2`).
-pub fn rows(src: &[f32], dst: &mut [f32], width: usize, kernel: &[f32], parallel: bool) {
+/// `(kernel.len() − 1)/2`). `spans[y]` holds every non-zero input of row `y` (pass
+/// `[0, width]` if unknown): taps outside it would only add zeros, which leave a sum
+/// unchanged bit for bit, so they are skipped (outside the omnidirectional mask, about
+/// 40 % of them).
+pub fn rows(
+    src: &[f32],
+    dst: &mut [f32],
+    width: usize,
+    kernel: &[f32],
+    spans: &[Span],
+    parallel: bool,
+) {
     if parallel {
         src.par_chunks_exact(width)
             .zip(dst.par_chunks_exact_mut(width))
+            .zip(spans)
             .with_min_len(16)
-            .for_each(|(s, d)| row(s, d, width, kernel));
+            .for_each(|((s, d), &span)| row(s, d, width, kernel, span));
     } else {
-        for (s, d) in src.chunks_exact(width).zip(dst.chunks_exact_mut(width)) {
-            row(s, d, width, kernel);
+        for ((s, d), &span) in src
+            .chunks_exact(width)
+            .zip(dst.chunks_exact_mut(width))
+            .zip(spans)
+        {
+            row(s, d, width, kernel, span);
         }
     }
 }
 
-fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32]) {
+fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], [a, b]: Span) {
     let r = (kernel.len() - 1) / 2;
     d.fill(0.0);
+    let (a, b) = (a.min(width) as isize, b.min(width) as isize);
     for (ki, &c) in kernel.iter().enumerate() {
         let k = ki as isize - r as isize;
-        let x0 = (-k).max(0) as usize;
-        let x1 = (width as isize - k).min(width as isize).max(0) as usize;
+        // Outputs x in [0, width) whose input x + k lies in [a, b).
+        let x0 = (a - k).max(0) as usize;
+        let x1 = (b - k).min(width as isize).max(0) as usize;
         if x0 >= x1 {
             continue;
         }
@@ -81,41 +101,41 @@ fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32]) {
 }
 
 /// Correlate the columns of a `width × height` image with `kernel`, writing only the
-/// rows listed in `out_rows` of `dst` (the others are left untouched).
+/// spans `out` (row, columns) of `dst` (the rest is left untouched).
 pub fn columns(
     src: &[f32],
     dst: &mut [f32],
     width: usize,
     height: usize,
     kernel: &[f32],
-    out_rows: &[usize],
+    out: &[(usize, Span)],
     parallel: bool,
 ) {
-    for &y in out_rows {
-        dst[y * width..(y + 1) * width].fill(0.0);
+    for &(y, [a, b]) in out {
+        dst[y * width + a..y * width + b].fill(0.0);
     }
-    add_columns(src, dst, width, height, kernel, out_rows, parallel);
+    add_columns(src, dst, width, height, kernel, out, parallel);
 }
 
-/// Add the column correlation of `src` with `kernel` to the rows `out_rows` of `dst`
-/// (`out_rows` increasing).
+/// Add the column correlation of `src` with `kernel` to the spans `out` (row, columns;
+/// rows increasing, at most one span per row) of `dst`.
 pub fn add_columns(
     src: &[f32],
     dst: &mut [f32],
     width: usize,
     height: usize,
     kernel: &[f32],
-    out_rows: &[usize],
+    out: &[(usize, Span)],
     parallel: bool,
 ) {
     let r = (kernel.len() - 1) / 2;
-    let one = |(y, d): (usize, &mut [f32])| {
+    let one = |y: usize, [a, b]: Span, d: &mut [f32]| {
         let k0 = r.saturating_sub(y);
         let k1 = (kernel.len()).min(height + r - y);
         for ki in k0..k1 {
             let c = kernel[ki];
             let yy = y + ki - r;
-            for (o, &i) in d.iter_mut().zip(&src[yy * width..(yy + 1) * width]) {
+            for (o, &i) in d[a..b].iter_mut().zip(&src[yy * width + a..yy * width + b]) {
                 *o += c * i;
             }
         }
@@ -124,11 +144,14 @@ pub fn add_columns(
         dst.par_chunks_exact_mut(width)
             .enumerate()
             .with_min_len(16)
-            .filter(|(y, _)| out_rows.binary_search(y).is_ok())
-            .for_each(one);
+            .for_each(|(y, d)| {
+                if let Ok(i) = out.binary_search_by_key(&y, |&(row, _)| row) {
+                    one(y, out[i].1, d);
+                }
+            });
     } else {
-        for &y in out_rows {
-            one((y, &mut dst[y * width..(y + 1) * width]));
+        for &(y, span) in out {
+            one(y, span, &mut dst[y * width..(y + 1) * width]);
         }
     }
 }

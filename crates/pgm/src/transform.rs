@@ -6,7 +6,7 @@ use splat::Frame;
 use ucm::Camera;
 
 use crate::PgmError;
-use crate::convolve::{self, Kernels};
+use crate::convolve::{self, Kernels, Span};
 
 /// Supported Gaussian extents, pixels.
 pub const LAMBDA_RANGE: std::ops::RangeInclusive<f32> = 0.5..=40.0;
@@ -72,7 +72,11 @@ pub struct Pgm {
     width: usize,
     height: usize,
     samples: Vec<u32>,
-    sample_rows: Vec<usize>,
+    /// Per sample row, the columns spanned by its samples.
+    sample_spans: Vec<(usize, Span)>,
+    /// Per image row, the columns spanned by its valid pixels (the image and `L_I` are
+    /// zero elsewhere).
+    row_spans: Vec<Span>,
     edge_distance_px: Vec<f32>,
     // Full-image planes.
     kernels: Kernels,
@@ -114,8 +118,23 @@ impl Pgm {
             .filter(|&k| valid[k])
             .map(|k| k as u32)
             .collect();
-        let mut sample_rows: Vec<usize> = samples.iter().map(|&k| k as usize / width).collect();
-        sample_rows.dedup();
+        let mut sample_spans: Vec<(usize, Span)> = Vec::new();
+        for &k in &samples {
+            let (x, y) = (k as usize % width, k as usize / width);
+            match sample_spans.last_mut() {
+                Some((row, span)) if *row == y => span[1] = x + 1,
+                _ => sample_spans.push((y, [x, x + 1])),
+            }
+        }
+        let row_spans: Vec<Span> = valid
+            .chunks_exact(width)
+            .map(
+                |row| match (row.iter().position(|&v| v), row.iter().rposition(|&v| v)) {
+                    (Some(a), Some(b)) => [a, b + 1],
+                    _ => [0, 0],
+                },
+            )
+            .collect();
         let edge_distance_px = edge_distance(valid, width, height);
         let n = width * height;
         let m = samples.len();
@@ -125,7 +144,8 @@ impl Pgm {
             width,
             height,
             samples,
-            sample_rows,
+            sample_spans,
+            row_spans,
             edge_distance_px,
             kernels: Kernels::default(),
             h_g: vec![0.0; n],
@@ -165,14 +185,21 @@ impl Pgm {
         let k = self.kernels(lambda);
         let w = self.width;
         let par = self.options.parallel;
-        convolve::rows(self.brightness.image(), &mut self.h_g, w, &k.g, par);
+        convolve::rows(
+            self.brightness.image(),
+            &mut self.h_g,
+            w,
+            &k.g,
+            &self.row_spans,
+            par,
+        );
         convolve::columns(
             &self.h_g,
             &mut self.out,
             w,
             self.height,
             &k.g,
-            &self.sample_rows,
+            &self.sample_spans,
             par,
         );
         for (v, &s) in self.values.iter_mut().zip(&self.samples) {
@@ -195,10 +222,18 @@ impl Pgm {
         let (w, h) = (self.width, self.height);
         let par = self.options.parallel;
         let image = self.brightness.image();
-        convolve::rows(image, &mut self.h_g, w, &k.g, par);
-        convolve::rows(image, &mut self.h_k2g, w, &k.k2g, par);
+        convolve::rows(image, &mut self.h_g, w, &k.g, &self.row_spans, par);
+        convolve::rows(image, &mut self.h_k2g, w, &k.k2g, &self.row_spans, par);
         // G.
-        convolve::columns(&self.h_g, &mut self.out, w, h, &k.g, &self.sample_rows, par);
+        convolve::columns(
+            &self.h_g,
+            &mut self.out,
+            w,
+            h,
+            &k.g,
+            &self.sample_spans,
+            par,
+        );
         for (v, &s) in self.values.iter_mut().zip(&self.samples) {
             *v = self.out[s as usize];
         }
@@ -209,7 +244,7 @@ impl Pgm {
             w,
             h,
             &k.g,
-            &self.sample_rows,
+            &self.sample_spans,
             par,
         );
         convolve::add_columns(
@@ -218,7 +253,7 @@ impl Pgm {
             w,
             h,
             &k.k2g,
-            &self.sample_rows,
+            &self.sample_spans,
             par,
         );
         let inv_l3 = 1.0 / (lambda * lambda * lambda);
@@ -236,14 +271,14 @@ impl Pgm {
                     {
                         *p = row[c];
                     }
-                    convolve::rows(&self.plane, &mut self.out2, w, &k.g, par);
+                    convolve::rows(&self.plane, &mut self.out2, w, &k.g, &self.row_spans, par);
                     convolve::columns(
                         &self.out2,
                         &mut self.out,
                         w,
                         h,
                         &k.g,
-                        &self.sample_rows,
+                        &self.sample_spans,
                         par,
                     );
                     for (l, &s) in self.interaction.iter_mut().zip(&self.samples) {
@@ -254,14 +289,14 @@ impl Pgm {
             }
             PgmJacobian::Paper { edge_margin } => {
                 // ∇G at the samples: ∂G/∂u = (dg rows, g cols), ∂G/∂v = (g rows, dg cols).
-                convolve::rows(image, &mut self.h_dg, w, &k.dg, par);
+                convolve::rows(image, &mut self.h_dg, w, &k.dg, &self.row_spans, par);
                 convolve::columns(
                     &self.h_dg,
                     &mut self.out,
                     w,
                     h,
                     &k.g,
-                    &self.sample_rows,
+                    &self.sample_spans,
                     par,
                 );
                 convolve::columns(
@@ -270,7 +305,7 @@ impl Pgm {
                     w,
                     h,
                     &k.dg,
-                    &self.sample_rows,
+                    &self.sample_spans,
                     par,
                 );
                 let factors = self.brightness.grid().factors();

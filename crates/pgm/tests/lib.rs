@@ -1,5 +1,6 @@
 //! Integration tests of `pgm`, one binary (modules below) for fast linking.
 
 mod common;
+mod convolve;
 mod pipeline;
 mod transform;

@@ -1,0 +1,105 @@
+//! The correlations against the textbook loops, bit for bit: skipping the zero inputs
+//! outside each row's span and writing only the wanted spans changes no value.
+
+use pgm::convolve::{Span, add_columns, columns, rows};
+use proptest::prelude::*;
+
+/// One output at a time over the whole row, taps in order, zero padding.
+fn reference_rows(src: &[f32], width: usize, kernel: &[f32]) -> Vec<f32> {
+    let r = (kernel.len() - 1) as isize / 2;
+    let mut out = vec![0.0f32; src.len()];
+    for (row_in, row_out) in src.chunks(width).zip(out.chunks_mut(width)) {
+        for (x, o) in row_out.iter_mut().enumerate() {
+            for (ki, &c) in kernel.iter().enumerate() {
+                let xs = x as isize + ki as isize - r;
+                if (0..width as isize).contains(&xs) {
+                    *o += c * row_in[xs as usize];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Adds the column correlation to every pixel of `out` at the rows `out_rows`.
+fn reference_add_columns(
+    src: &[f32],
+    out: &mut [f32],
+    width: usize,
+    kernel: &[f32],
+    out_rows: &[usize],
+) {
+    let height = src.len() / width;
+    let r = (kernel.len() - 1) as isize / 2;
+    for &y in out_rows {
+        for x in 0..width {
+            for (ki, &c) in kernel.iter().enumerate() {
+                let ys = y as isize + ki as isize - r;
+                if (0..height as isize).contains(&ys) {
+                    out[y * width + x] += c * src[ys as usize * width + x];
+                }
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Any size (narrower or wider than the kernel), any kernel radius and sign, inputs
+    /// zero outside random spans (some empty), sequential or parallel.
+    #[test]
+    fn correlations_equal_the_textbook_loops(
+        width in 1usize..70,
+        height in 1usize..40,
+        radius in 0usize..30,
+        seed in any::<u64>(),
+        parallel in any::<bool>(),
+        row_step in 1usize..4,
+    ) {
+        let mut rng = splat::rng::SplitMix64::new(seed);
+        let spans: Vec<Span> = (0..height)
+            .map(|_| {
+                let a = (rng.unit() * width as f64) as usize;
+                let b = a + (rng.unit() * (width - a + 1) as f64) as usize;
+                [a, b.min(width)]
+            })
+            .collect();
+        let mut src = vec![0.0f32; width * height];
+        for (y, &[a, b]) in spans.iter().enumerate() {
+            for v in &mut src[y * width + a..y * width + b] {
+                *v = rng.uniform(-1.0, 1.0) as f32;
+            }
+        }
+        let kernel: Vec<f32> = (0..2 * radius + 1).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+
+        let mut out = vec![0.0f32; src.len()];
+        rows(&src, &mut out, width, &kernel, &spans, parallel);
+        let expected = reference_rows(&src, width, &kernel);
+        prop_assert!(out.iter().zip(&expected).all(|(a, b)| a.to_bits() == b.to_bits()));
+
+        let out_rows: Vec<usize> = (0..height).step_by(row_step).collect();
+        let wanted: Vec<(usize, Span)> = out_rows.iter().map(|&y| (y, spans[y])).collect();
+        let base: Vec<f32> = (0..src.len()).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+        let in_spans = |got: &[f32], expected: &[f32]| {
+            wanted.iter().all(|&(y, [a, b])| {
+                (a..b).all(|x| got[y * width + x].to_bits() == expected[y * width + x].to_bits())
+            })
+        };
+
+        let mut expected = base.clone();
+        reference_add_columns(&src, &mut expected, width, &kernel, &out_rows);
+        let mut got = base.clone();
+        add_columns(&src, &mut got, width, height, &kernel, &wanted, parallel);
+        prop_assert!(in_spans(&got, &expected));
+
+        let mut expected = base.clone();
+        for &y in &out_rows {
+            expected[y * width..(y + 1) * width].fill(0.0);
+        }
+        reference_add_columns(&src, &mut expected, width, &kernel, &out_rows);
+        let mut got = base;
+        columns(&src, &mut got, width, height, &kernel, &wanted, parallel);
+        prop_assert!(in_spans(&got, &expected));
+    }
+}
