@@ -104,3 +104,57 @@ pub fn register_font() {
         );
     });
 }
+
+/// What every chart of the harness shares: labelled lines and the legend.
+pub(crate) mod plot {
+    use plotters::coord::Shift;
+    use plotters::prelude::*;
+
+    /// A plotting error as an `anyhow` error.
+    pub(crate) fn error<E: std::error::Error + Send + Sync>(
+        e: DrawingAreaErrorKind<E>,
+    ) -> anyhow::Error {
+        anyhow::anyhow!("{e}")
+    }
+
+    /// Draw `points` as a line of `style`, listed in the legend as `label`.
+    pub(crate) fn line<'a, DB, X, Y>(
+        chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+        points: Vec<(f64, f64)>,
+        label: impl Into<String>,
+        style: ShapeStyle,
+    ) -> anyhow::Result<()>
+    where
+        DB: DrawingBackend + 'a,
+        X: Ranged<ValueType = f64>,
+        Y: Ranged<ValueType = f64>,
+    {
+        chart
+            .draw_series(LineSeries::new(points, style))
+            .map_err(error)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        Ok(())
+    }
+
+    /// Draw the legend (upper left, on white) and write the picture out.
+    pub(crate) fn finish<'a, DB, X, Y>(
+        chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+        root: &DrawingArea<DB, Shift>,
+    ) -> anyhow::Result<()>
+    where
+        DB: DrawingBackend + 'a,
+        X: Ranged,
+        Y: Ranged,
+    {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(error)?;
+        root.present().map_err(error)?;
+        Ok(())
+    }
+}

@@ -34,7 +34,8 @@ pub struct RunRecord {
     pub lambda: f32,
     /// Final cost.
     pub cost: f64,
-    /// Wall time, seconds.
+    /// Wall time of the run's iterations, seconds: what the run takes alone (a step 1
+    /// that Rule1 and Rule2 share counts in both).
     pub wall_time_s: f64,
     /// Final position error below the threshold.
     pub success: bool,
@@ -268,9 +269,8 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
     threshold_m: f64,
 ) -> anyhow::Result<()> {
     use plotters::prelude::*;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
     let summaries = summarize(records);
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(crate::plot::error)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
             "Cumulative distribution of final position errors",
@@ -280,21 +280,19 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(50)
         .build_cartesian_2d((1e-4f64..100.0f64).log_scale(), 0.0f64..100.0)
-        .map_err(err)?;
+        .map_err(crate::plot::error)?;
     chart
         .configure_mesh()
         .x_desc("final position error (m)")
         .y_desc("runs (%)")
         .draw()
-        .map_err(err)?;
-    chart
-        .draw_series(LineSeries::new(
-            [(threshold_m, 0.0), (threshold_m, 100.0)],
-            BLACK.stroke_width(1),
-        ))
-        .map_err(err)?
-        .label(format!("{:.0} cm threshold", threshold_m * 100.0))
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+        .map_err(crate::plot::error)?;
+    crate::plot::line(
+        &mut chart,
+        vec![(threshold_m, 0.0), (threshold_m, 100.0)],
+        format!("{:.0} cm threshold", threshold_m * 100.0),
+        BLACK.stroke_width(1),
+    )?;
     for (i, m) in summaries.iter().enumerate() {
         let mut errors: Vec<f64> = records
             .iter()
@@ -310,25 +308,12 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
         }
         points.push((100.0, 100.0));
         let color = Palette99::pick(i).to_rgba();
-        chart
-            .draw_series(LineSeries::new(points, color.stroke_width(2)))
-            .map_err(err)?
-            .label(format!(
-                "{} ({:.0} %)",
-                m.method,
-                100.0 * m.successes as f64 / n.max(1.0)
-            ))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+        let label = format!(
+            "{} ({:.0} %)",
+            m.method,
+            100.0 * m.successes as f64 / n.max(1.0)
+        );
+        crate::plot::line(&mut chart, points, label, color.stroke_width(2))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)?;
-    Ok(())
+    crate::plot::finish(&mut chart, &root)
 }

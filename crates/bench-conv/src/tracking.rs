@@ -577,8 +577,7 @@ fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(
     results: &TrackingResults,
 ) -> anyhow::Result<()> {
     use plotters::prelude::*;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(crate::plot::error)?;
     let truth: Vec<(f64, f64)> = results
         .truth
         .iter()
@@ -603,43 +602,25 @@ fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(
             (cx - half * 1.3)..(cx + half * 1.3),
             (cy - half)..(cy + half),
         )
-        .map_err(err)?;
+        .map_err(crate::plot::error)?;
     chart
         .configure_mesh()
         .x_desc("world X (m)")
         .y_desc("world Y (m)")
         .draw()
-        .map_err(err)?;
-    chart
-        .draw_series(LineSeries::new(truth, BLACK.stroke_width(3)))
-        .map_err(err)?
-        .label("ground truth")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
+        .map_err(crate::plot::error)?;
+    crate::plot::line(&mut chart, truth, "ground truth", BLACK.stroke_width(3))?;
     for (label, color, points) in results.series(|r| (r.estimated_pose[0], r.estimated_pose[1])) {
-        chart
-            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
-            .map_err(err)?
-            .label(label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+        crate::plot::line(&mut chart, points.clone(), label, color.stroke_width(2))?;
         chart
             .draw_series(
                 points
                     .into_iter()
                     .map(|p| Circle::new(p, 2, color.filled())),
             )
-            .map_err(err)?;
+            .map_err(crate::plot::error)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)?;
-    Ok(())
+    crate::plot::finish(&mut chart, &root)
 }
 
 fn draw_errors<DB: plotters::prelude::DrawingBackend>(
@@ -647,8 +628,7 @@ fn draw_errors<DB: plotters::prelude::DrawingBackend>(
     results: &TrackingResults,
 ) -> anyhow::Result<()> {
     use plotters::prelude::*;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e}");
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(crate::plot::error)?;
     let frames = results.truth.len().max(2) as f64;
     let mut chart = ChartBuilder::on(&root)
         .caption("Position error per frame", ("sans-serif", 20))
@@ -656,33 +636,19 @@ fn draw_errors<DB: plotters::prelude::DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(0.0..frames, (1e-4f64..10.0f64).log_scale())
-        .map_err(err)?;
+        .map_err(crate::plot::error)?;
     chart
         .configure_mesh()
         .x_desc("frame")
         .y_desc("position error (m)")
         .draw()
-        .map_err(err)?;
+        .map_err(crate::plot::error)?;
     for (label, color, points) in
         results.series(|r| (r.frame as f64, r.position_error_m.clamp(1e-4, 10.0)))
     {
-        chart
-            .draw_series(LineSeries::new(points, color.stroke_width(2)))
-            .map_err(err)?
-            .label(label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+        crate::plot::line(&mut chart, points, label, color.stroke_width(2))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)?;
-    Ok(())
+    crate::plot::finish(&mut chart, &root)
 }
 
 /// The superimposition of an acquired image (red) and the image rendered at the

@@ -152,8 +152,6 @@ struct Candidate {
     nearest_m: f32,
 }
 
-/// Edge of the square tiles of the occlusion test, pixels.
-const TILE: usize = 8;
 /// The first batch of points drawn before any occlusion test, and the smallest batch.
 const MIN_BATCH_POINTS: usize = 16_384;
 
@@ -193,9 +191,6 @@ pub struct Renderer {
     /// Per pixel: all ones where valid, zero where masked (masked pixels never keep a
     /// cell from being culled).
     valid_bits: Vec<u32>,
-    /// Per tile: the largest depth key of its valid pixels (0 if it has none).
-    tiles: Vec<u32>,
-    tiles_x: usize,
     theta_min: f32,
     theta_max: f32,
 }
@@ -244,8 +239,6 @@ impl Renderer {
             .iter()
             .map(|&v| if v { u32::MAX } else { 0 })
             .collect();
-        let tiles_x = (camera.width() as usize).div_ceil(TILE);
-        let tiles_y = (camera.height() as usize).div_ceil(TILE);
         Ok(Self {
             camera,
             options,
@@ -258,8 +251,6 @@ impl Renderer {
             splats: Vec::new(),
             status: vec![PixelStatus::Sky; n],
             valid_bits,
-            tiles: vec![0; tiles_x * tiles_y],
-            tiles_x,
             theta_min,
             theta_max,
         })
@@ -370,9 +361,6 @@ impl Renderer {
                 parallel,
             );
             points_drawn += batch_points;
-            if occlusion && next < self.candidates.len() {
-                self.update_tiles();
-            }
         }
         let splats = &self.splats[..points_drawn];
         if parallel {
@@ -509,31 +497,6 @@ impl Renderer {
         });
     }
 
-    /// Recompute the largest depth key of every tile's valid pixels.
-    fn update_tiles(&mut self) {
-        let w = self.camera.width() as usize;
-        let h = self.camera.height() as usize;
-        self.tiles.fill(0);
-        for row in 0..h {
-            let tile_row = &mut self.tiles[(row / TILE) * self.tiles_x..][..self.tiles_x];
-            let depth = &self.depth[row * w..(row + 1) * w];
-            let valid = &self.valid_bits[row * w..(row + 1) * w];
-            for ((tile, depth), valid) in tile_row
-                .iter_mut()
-                .zip(depth.chunks(TILE))
-                .zip(valid.chunks(TILE))
-            {
-                let row_max = depth
-                    .iter()
-                    .zip(valid)
-                    .map(|(d, v)| d.load(Ordering::Relaxed) & v)
-                    .max()
-                    .unwrap_or(0);
-                *tile = (*tile).max(row_max);
-            }
-        }
-    }
-
     /// Whether every pixel that a point of `candidate` could cover already holds a
     /// range nearer than the cell by more than the depth band (then the cell can
     /// change nothing). Conservative: `false` whenever in doubt.
@@ -555,9 +518,6 @@ impl Renderer {
             if farthest == EMPTY {
                 return false;
             }
-        }
-        if farthest == EMPTY {
-            return false;
         }
         // Margins cover the f32 rounding of the points' ranges and of the band test.
         let nearest = candidate.nearest_m * (1.0 - 1e-4) - 1e-3;

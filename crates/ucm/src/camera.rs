@@ -99,29 +99,13 @@ impl Camera {
     /// ([`UcmError::MaskSizeMismatch`]).
     pub fn rescaled(&self, factor: u32) -> Result<Self, UcmError> {
         let f = f64::from(factor);
-        let centre = |c: f64| (c + 0.5) * f - 0.5;
-        let mut intrinsics = self.intrinsics;
-        intrinsics.alpha_u *= f;
-        intrinsics.alpha_v *= f;
-        intrinsics.skew *= f;
-        intrinsics.u0 = centre(intrinsics.u0);
-        intrinsics.v0 = centre(intrinsics.v0);
-        let region = match &self.region {
-            ValidRegion::Full => ValidRegion::Full,
-            ValidRegion::Annulus(a) => ValidRegion::Annulus(crate::Annulus {
-                center_px: [centre(a.center_px[0]), centre(a.center_px[1])],
-                inner_radius_px: a.inner_radius_px * f,
-                outer_radius_px: a.outer_radius_px * f,
-            }),
-            ValidRegion::Mask(m) => {
-                return Err(UcmError::MaskSizeMismatch {
-                    mask_width: m.width(),
-                    mask_height: m.height(),
-                    width: self.width * factor,
-                    height: self.height * factor,
-                });
-            }
-        };
+        let (intrinsics, region) = self.scaled(|length| length * f);
+        let region = region.map_err(|m| UcmError::MaskSizeMismatch {
+            mask_width: m.width(),
+            mask_height: m.height(),
+            width: self.width * factor,
+            height: self.height * factor,
+        })?;
         Self::new(
             intrinsics,
             self.distortion,
@@ -145,21 +129,10 @@ impl Camera {
             return Err(UcmError::EmptyImage { width, height });
         }
         let f = f64::from(factor);
-        let centre = |c: f64| (c + 0.5) / f - 0.5;
-        let mut intrinsics = self.intrinsics;
-        intrinsics.alpha_u /= f;
-        intrinsics.alpha_v /= f;
-        intrinsics.skew /= f;
-        intrinsics.u0 = centre(intrinsics.u0);
-        intrinsics.v0 = centre(intrinsics.v0);
-        let region = match &self.region {
-            ValidRegion::Full => ValidRegion::Full,
-            ValidRegion::Annulus(a) => ValidRegion::Annulus(crate::Annulus {
-                center_px: [centre(a.center_px[0]), centre(a.center_px[1])],
-                inner_radius_px: a.inner_radius_px / f,
-                outer_radius_px: a.outer_radius_px / f,
-            }),
-            ValidRegion::Mask(m) => {
+        let (intrinsics, region) = self.scaled(|length| length / f);
+        let region = match region {
+            Ok(region) => region,
+            Err(m) => {
                 let (w, k) = (self.width as usize, factor as usize);
                 let flags = m.flags();
                 let valid = (0..height as usize)
@@ -172,6 +145,33 @@ impl Camera {
             }
         };
         Self::new(intrinsics, self.distortion, width, height, region)
+    }
+
+    /// The intrinsics and the analytic valid region of the same field of view with
+    /// pixel lengths mapped by `length` (pixel centres such that blocks of pixels and
+    /// their centres correspond); an explicit mask is returned as the error, for the
+    /// callers to resample or refuse.
+    fn scaled(
+        &self,
+        length: impl Fn(f64) -> f64,
+    ) -> (Intrinsics, Result<ValidRegion, &crate::Mask>) {
+        let centre = |c: f64| length(c + 0.5) - 0.5;
+        let mut intrinsics = self.intrinsics;
+        intrinsics.alpha_u = length(intrinsics.alpha_u);
+        intrinsics.alpha_v = length(intrinsics.alpha_v);
+        intrinsics.skew = length(intrinsics.skew);
+        intrinsics.u0 = centre(intrinsics.u0);
+        intrinsics.v0 = centre(intrinsics.v0);
+        let region = match &self.region {
+            ValidRegion::Full => Ok(ValidRegion::Full),
+            ValidRegion::Annulus(a) => Ok(ValidRegion::Annulus(crate::Annulus {
+                center_px: [centre(a.center_px[0]), centre(a.center_px[1])],
+                inner_radius_px: length(a.inner_radius_px),
+                outer_radius_px: length(a.outer_radius_px),
+            })),
+            ValidRegion::Mask(m) => Err(m),
+        };
+        (intrinsics, region)
     }
 
     /// The model's parameters.
