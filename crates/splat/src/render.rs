@@ -706,13 +706,20 @@ fn floor_small(x: f32) -> i32 {
     nearest - i32::from(nearest as f32 > x)
 }
 
+/// `x` limited to `[lo, hi]`, NaN sent to `lo` (`f32::clamp` keeps NaN, which a
+/// saturating conversion would then have to handle).
+#[inline(always)]
+#[allow(clippy::manual_clamp)]
+fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    x.max(lo).min(hi)
+}
+
 /// Round to the nearest integer (halves up) for values in the range of pixel
 /// coordinates.
 #[inline(always)]
 fn round_px(x: f32) -> i32 {
-    // Clamp first: the projection of points near the domain's edge can be huge. `max`
-    // and `min` (unlike `clamp`) also send NaN to a bound.
-    floor_small(x.max(-30_000.0).min(30_000.0) + 0.5)
+    // Limit first: the projection of points near the domain's edge can be huge.
+    floor_small(limit(x, -30_000.0, 30_000.0) + 0.5)
 }
 
 /// The splat of one point, or `None` if it is not seen (behind the viewpoint, outside
@@ -757,7 +764,7 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
 /// `ceil((size − 1)/2)`, at most `max_radius` (no libm call, no branch).
 #[inline(always)]
 fn half_width(size: f32, max_radius: i32) -> i32 {
-    let h = ((size - 1.0) * 0.5).max(0.0).min(1000.0);
+    let h = limit((size - 1.0) * 0.5, 0.0, 1000.0);
     let t = floor_small(h);
     (t + i32::from((t as f32) < h)).min(max_radius)
 }
@@ -808,7 +815,7 @@ fn project_block(
             i32::from(NOT_DRAWN)
         };
         range[k] = rho;
-        intensity[k] = floor_small((grey * INTENSITY_SCALE + 0.5).max(0.0).min(65535.0));
+        intensity[k] = floor_small(limit(grey * INTENSITY_SCALE + 0.5, 0.0, 65535.0));
     }
     for k in 0..BLOCK {
         out[k] = Splat {
