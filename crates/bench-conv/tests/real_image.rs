@@ -1,27 +1,8 @@
 //! The PGM of the real catadioptric image of `../shared/data` (the paper's Fig. 1).
 
-use std::path::PathBuf;
-
 use bench_conv::real_image::{load_grey_frame, write_pgm_images};
 use pgm::{Pgm, PgmOptions};
-
-fn data_dir() -> Option<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let dir = std::env::var_os("PGM_DATA_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("../shared/data"));
-    if dir.is_dir() {
-        Some(dir)
-    } else if std::env::var_os("CI").is_some() {
-        panic!("PGM_DATA_DIR ({}) is not a folder in CI", dir.display());
-    } else {
-        eprintln!(
-            "skipped: no data folder at {} (set PGM_DATA_DIR)",
-            dir.display()
-        );
-        None
-    }
-}
+use test_support::data_dir;
 
 /// Mean absolute difference between horizontal neighbours, relative to the mean.
 fn roughness(values: &[f32], samples: &[u32], width: usize) -> f64 {

@@ -1,10 +1,14 @@
 //! Separable correlation with zero padding, the workhorse of the transform.
 //!
 //! `out[x] = Σ_{k=−r..r} K[k + r] · in[x + k]`, the sum restricted to `0 ≤ x + k < n`
-//! (exact zero padding: pixels outside the image contribute nothing). Written as
-//! `axpy` loops over whole rows so that the compiler vectorises them. Rows (and
-//! output rows of the column pass) are independent: with `parallel`, they are spread
-//! over rayon's threads, and the result does not depend on the thread count.
+//! (exact zero padding: pixels outside the image contribute nothing). Every output
+//! adds its taps in kernel order, so both passes give the textbook sums bit for bit
+//! (tested). The row pass keeps 32 neighbouring outputs in registers over all taps;
+//! the column pass is an `axpy` over whole rows, one tap at a time (the same in
+//! registers was 3× slower: the taps' rows, 1280 bytes apart at 320 pixels, fall on a
+//! few L1 cache sets). Both vectorise. Rows (and output rows of the column pass) are
+//! independent: with `parallel`, they are spread over rayon's threads, and the result
+//! does not depend on the thread count.
 
 use rayon::prelude::*;
 

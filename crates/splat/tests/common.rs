@@ -2,36 +2,13 @@
 
 use std::path::PathBuf;
 use std::sync::OnceLock;
+pub use test_support::{data_dir, workspace_root as root};
 
 use splat::city::{City, CityParams};
-
-/// The workspace root.
-pub fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 /// A fixture camera by file name.
 pub fn fixture(name: &str) -> ucm::Camera {
     ucm::Camera::load_toml(root().join("fixtures").join(name)).unwrap()
-}
-
-/// The shared real data (`PGM_DATA_DIR`, else `../shared/data` beside the checkout);
-/// `None` (skipped, with a message) only outside CI.
-pub fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("PGM_DATA_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("../shared/data"));
-    if dir.is_dir() {
-        Some(dir)
-    } else if std::env::var_os("CI").is_some() {
-        panic!("PGM_DATA_DIR ({}) is not a folder in CI", dir.display());
-    } else {
-        eprintln!(
-            "skipped: no data folder at {} (set PGM_DATA_DIR)",
-            dir.display()
-        );
-        None
-    }
 }
 
 /// The default city, generated once per test binary.

@@ -1,7 +1,7 @@
 //! Shared proptest strategies and helpers.
 
 use proptest::prelude::*;
-use std::path::PathBuf;
+pub use test_support::{data_dir, workspace_root as root};
 use ucm::{Annulus, Camera, Distortion, Intrinsics, ValidRegion};
 
 /// Random intrinsics with ξ in [0, 1.5] and a full-image region of 640×480 (tests of
@@ -61,31 +61,6 @@ pub fn twist_strategy() -> impl Strategy<Value = [f64; 6]> {
 /// The fixture camera of the protocols.
 pub fn fixture_320() -> Camera {
     Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap()
-}
-
-/// The workspace root.
-pub fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// The shared real data (`PGM_DATA_DIR`, else `../shared/data` beside the checkout).
-/// `None` (test skipped, with a message) only outside CI: in CI a missing data folder
-/// fails the test.
-pub fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("PGM_DATA_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("../shared/data"));
-    if dir.is_dir() {
-        Some(dir)
-    } else if std::env::var_os("CI").is_some() {
-        panic!("PGM_DATA_DIR ({}) is not a folder in CI", dir.display());
-    } else {
-        eprintln!(
-            "skipped: no data folder at {} (set PGM_DATA_DIR)",
-            dir.display()
-        );
-        None
-    }
 }
 
 /// A relative error robust to tiny values.
