@@ -125,8 +125,20 @@ pub fn merge(parts: Vec<Vec<RunRecord>>) -> anyhow::Result<Vec<RunRecord>> {
     Ok(all)
 }
 
-/// The paper's success rates (§3.2), by method name prefix.
+/// The paper's success rate (§3.2) of one of its configurations, by method name
+/// (`povs`, `rule0/convolved`, `rule2/paper`, …); `None` for the variants beyond it.
 pub fn paper_success_rate(method: &str) -> Option<f64> {
+    // Only the paper's configurations ("povs", "rule2/convolved", "rule1/paper", …),
+    // not the variants beyond it ("rule2/convolved+lm").
+    if let Some((_, jacobian)) = method.split_once('/') {
+        let known = ["convolved", "paper"].contains(&jacobian)
+            || jacobian
+                .strip_prefix("paper-margin")
+                .is_some_and(|m| m.parse::<f32>().is_ok());
+        if !known {
+            return None;
+        }
+    }
     match method.split('/').next()? {
         "rule2" => Some(97.0),
         "rule1" => Some(78.0),

@@ -3,10 +3,7 @@ use std::path::PathBuf;
 use bench_conv::protocol::Protocol;
 use bench_conv::report::{merge, read_csv, summarize, summary_markdown, write_csv};
 use bench_conv::run::{Shard, load_scene, run_protocol};
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+use test_support::workspace_root as root;
 
 fn temp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("bench-conv-{name}-{}", std::process::id()));
@@ -214,4 +211,16 @@ fn bad_protocols_are_clear_errors() {
     );
     assert!(message.contains("outside the cloud"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_papers_rates_stand_beside_its_configurations_only() {
+    use bench_conv::report::paper_success_rate;
+    assert_eq!(paper_success_rate("povs"), Some(0.0));
+    assert_eq!(paper_success_rate("rule0/convolved"), Some(70.0));
+    assert_eq!(paper_success_rate("rule1/paper"), Some(78.0));
+    assert_eq!(paper_success_rate("rule2/paper-margin3"), Some(97.0));
+    assert_eq!(paper_success_rate("rule2/convolved+lm"), None);
+    assert_eq!(paper_success_rate("rule2/convolved+no-stall"), None);
+    assert_eq!(paper_success_rate("my-method"), None);
 }

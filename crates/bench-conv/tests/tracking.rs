@@ -1,17 +1,12 @@
 //! The sequence generator (trajectory, shaking, acquired images) and tracking.
 
-use std::path::PathBuf;
-
 use bench_conv::sequence::{Acquisition, Trajectory};
 use bench_conv::tracking::{
     SequenceSpec, TrackingResults, read_csv, run_sequence, summarize, write_csv, write_results,
 };
 use splat::{Frame, PixelStatus};
+use test_support::workspace_root as root;
 use ucm::Camera;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 fn camera() -> Camera {
     Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap()

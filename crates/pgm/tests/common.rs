@@ -1,17 +1,13 @@
 //! Shared helpers: fixtures, the city, finite differences of the render → feature
 //! pipeline.
 
-use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use glam::DVec3;
 use splat::city::{City, CityParams, camera_looking_down};
 use splat::{Frame, RenderOptions, Renderer};
+pub use test_support::workspace_root as root;
 use ucm::Isometry3;
-
-pub fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 pub fn fixture(name: &str) -> ucm::Camera {
     ucm::Camera::load_toml(root().join("fixtures").join(name)).unwrap()
