@@ -78,25 +78,36 @@ pub fn rows(
     parallel: bool,
 ) {
     let pad_len = width + kernel.len() + LANES;
+    // Each thread keeps its padded row between calls: no allocation per image.
+    let one = |(s, d): (&[f32], &mut [f32]), span: Span| {
+        PAD.with_borrow_mut(|pad| {
+            if pad.len() < pad_len {
+                pad.resize(pad_len, 0.0);
+            }
+            row(s, d, width, kernel, span, pad);
+        });
+    };
     if parallel {
         src.par_chunks_exact(width)
             .zip(dst.par_chunks_exact_mut(width))
             .zip(spans)
             .with_min_len(16)
-            .for_each_init(
-                || vec![0.0; pad_len],
-                |pad, ((s, d), &span)| row(s, d, width, kernel, span, pad),
-            );
+            .for_each(|(row, &span)| one(row, span));
     } else {
-        let mut pad = vec![0.0; pad_len];
-        for ((s, d), &span) in src
+        for (row, &span) in src
             .chunks_exact(width)
             .zip(dst.chunks_exact_mut(width))
             .zip(spans)
         {
-            row(s, d, width, kernel, span, &mut pad);
+            one(row, span);
         }
     }
+}
+
+thread_local! {
+    /// The zero-padded row of [`rows`], per thread (zero outside the copy it holds
+    /// during one row).
+    static PAD: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// One row of [`rows`]; `pad` holds at least `width + kernel.len() + LANES` values

@@ -5,8 +5,9 @@
 //! `cargo run --release -p splat --example lod -- [LOD_SPACING_PX|all] [SPLAT_SCALE]`
 //! (defaults: the renderer's, 0.5 px and 1.5; from the workspace root).
 
-use glam::DVec3;
-use splat::city::{City, CityParams, camera_looking_down};
+mod common;
+
+use splat::city::{City, CityParams};
 use splat::{Frame, PixelStatus, RenderOptions, Renderer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -43,16 +44,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("lod_spacing_px {lod_spacing_px:?}, splat_scale {splat_scale}");
     println!("pose | points drawn | time (best of 5) | mean |I - I_ref| | pixels hit in one only");
     let (mut total_points, mut total_ms, mut total_err, mut total_n) = (0, 0.0, 0.0, 0);
-    for (x, y, z, heading) in [
-        (-20.0, 0.5, 3.0, 0.0),
-        (-28.0, 2.5, 4.5, 0.0),
-        (-12.0, -1.5, 1.5, 0.2),
-        (0.4, -38.0, 3.0, 1.57),
-        (-2.0, 0.0, 3.0, 0.3),
-        (30.0, 1.0, 2.0, 0.1),
-        (0.0, 25.0, 3.5, 1.4),
-    ] {
-        let pose = camera_looking_down(DVec3::new(x, y, z), heading).inverse();
+    for view in common::STREET_VIEWS {
+        let pose = common::camera_from_world(view);
+        let (x, y, z, _) = view;
         reference.render(&city.cloud, &pose, &mut fine_frame)?;
         let truth = fine_frame.downsampled(4, &camera)?;
         let mut best_ms = f64::MAX;

@@ -3,8 +3,9 @@
 //! and without it, and whether the frames are identical.
 //! `cargo run --release -p splat --example occlusion` (from the workspace root).
 
-use glam::DVec3;
-use splat::city::{City, CityParams, camera_looking_down};
+mod common;
+
+use splat::city::{City, CityParams};
 use splat::{Frame, RenderOptions, Renderer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -20,14 +21,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mut renderers = [renderer(false)?, renderer(true)?];
     let mut frames = [Frame::for_camera(&camera), Frame::for_camera(&camera)];
-    for (x, y, z, heading) in [
-        (-20.0, 0.5, 3.0, 0.0),
-        (-28.0, 2.5, 4.5, 0.0),
-        (-12.0, -1.5, 1.5, 0.2),
-        (0.4, -38.0, 3.0, 1.57),
-        (-2.0, 0.0, 3.0, 0.3),
-    ] {
-        let pose = camera_looking_down(DVec3::new(x, y, z), heading).inverse();
+    for view in &common::STREET_VIEWS[..5] {
+        let pose = common::camera_from_world(*view);
+        let (x, y, z, _) = *view;
         let mut best_ms = [f64::MAX; 2];
         let mut stats = [Default::default(); 2];
         for _ in 0..3 {

@@ -828,38 +828,47 @@ fn project_block(
     }
 }
 
+impl Splat {
+    /// Call `f` with the index of every pixel the splat covers, clipped to the image
+    /// (a drawn splat: `half != NOT_DRAWN`, so it reaches the image).
+    #[inline(always)]
+    fn for_each_pixel(&self, view: &View, mut f: impl FnMut(usize)) {
+        let w = view.width as usize;
+        let (iu, iv, half) = (i32::from(self.iu), i32::from(self.iv), i32::from(self.half));
+        if half == 0 {
+            // Most splats: a single pixel, inside the image.
+            f(iv as usize * w + iu as usize);
+            return;
+        }
+        let (u0, u1) = (
+            (iu - half).max(0) as usize,
+            (iu + half).min(view.width - 1) as usize,
+        );
+        let (v0, v1) = (
+            (iv - half).max(0) as usize,
+            (iv + half).min(view.height - 1) as usize,
+        );
+        for row in v0..=v1 {
+            for k in row * w + u0..=row * w + u1 {
+                f(k);
+            }
+        }
+    }
+}
+
 /// Take the minimum of `key` and the depth of each pixel of a splat.
 #[inline(always)]
 fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) {
-    let w = view.width as usize;
     let key = s.range.to_bits();
-    let min = |cell: &AtomicU32| {
+    s.for_each_pixel(view, |k| {
+        let cell = &depth[k];
         if atomic {
             cell.fetch_min(key, Ordering::Relaxed);
         } else {
             // Branch-free: whether a point is nearer is unpredictable.
             cell.store(key.min(cell.load(Ordering::Relaxed)), Ordering::Relaxed);
         }
-    };
-    let (iu, iv, half) = (i32::from(s.iu), i32::from(s.iv), i32::from(s.half));
-    if half == 0 {
-        // Most splats: a single pixel, inside the image.
-        min(&depth[iv as usize * w + iu as usize]);
-        return;
-    }
-    let (u0, u1) = (
-        (iu - half).max(0) as usize,
-        (iu + half).min(view.width - 1) as usize,
-    );
-    let (v0, v1) = (
-        (iv - half).max(0) as usize,
-        (iv + half).min(view.height - 1) as usize,
-    );
-    for row in v0..=v1 {
-        for cell in &depth[row * w + u0..=row * w + u1] {
-            min(cell);
-        }
-    }
+    });
 }
 
 /// Pass 1 over the points of some cells: project each point once, keep its splat in
@@ -925,66 +934,32 @@ fn accumulate(
     accum: &[[AtomicU64; 2]],
     atomic: bool,
 ) {
-    let w = view.width as usize;
-    let add = |k: usize, sample: u64, range_sample: u64| {
-        let [slot, range] = &accum[k];
-        if atomic {
-            slot.fetch_add(sample, Ordering::Relaxed);
-            range.fetch_add(range_sample, Ordering::Relaxed);
-        } else {
-            slot.store(slot.load(Ordering::Relaxed) + sample, Ordering::Relaxed);
-            range.store(
-                range.load(Ordering::Relaxed) + range_sample,
-                Ordering::Relaxed,
-            );
-        }
-    };
-    for s in splats {
-        if s.half == NOT_DRAWN {
-            continue;
-        }
+    for s in splats.iter().filter(|s| s.half != NOT_DRAWN) {
         let sample = (u64::from(s.intensity) << COUNT_BITS) | 1;
         // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
         let range_sample = (s.range * RANGE_SCALE + 0.5) as i64 as u64;
         let limit = s.range / (1.0 + view.depth_band);
-        let (iu, iv, half) = (i32::from(s.iu), i32::from(s.iv), i32::from(s.half));
-        if half == 0 {
-            // Most splats: a single pixel, inside the image.
-            let k = iv as usize * w + iu as usize;
+        s.for_each_pixel(view, |k| {
             let near = f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit;
+            let [slot, range] = &accum[k];
             if atomic {
                 if near {
-                    add(k, sample, range_sample);
+                    slot.fetch_add(sample, Ordering::Relaxed);
+                    range.fetch_add(range_sample, Ordering::Relaxed);
                 }
             } else {
                 // Branch-free: whether a sample is within the band is unpredictable.
                 let keep = u64::from(near);
-                add(k, sample * keep, range_sample * keep);
+                slot.store(
+                    slot.load(Ordering::Relaxed) + sample * keep,
+                    Ordering::Relaxed,
+                );
+                range.store(
+                    range.load(Ordering::Relaxed) + range_sample * keep,
+                    Ordering::Relaxed,
+                );
             }
-            continue;
-        }
-        let (u0, u1) = (
-            (iu - half).max(0) as usize,
-            (iu + half).min(view.width - 1) as usize,
-        );
-        let (v0, v1) = (
-            (iv - half).max(0) as usize,
-            (iv + half).min(view.height - 1) as usize,
-        );
-        for row in v0..=v1 {
-            let base = row * w;
-            for col in u0..=u1 {
-                let near = f32::from_bits(depth[base + col].load(Ordering::Relaxed)) >= limit;
-                if atomic {
-                    if near {
-                        add(base + col, sample, range_sample);
-                    }
-                } else {
-                    let keep = u64::from(near);
-                    add(base + col, sample * keep, range_sample * keep);
-                }
-            }
-        }
+        });
     }
 }
 
