@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
+use crate::reproduce::Build;
+
 pub mod fixtures;
 pub mod reproduce;
 
@@ -22,18 +24,22 @@ const HELP: &str = "\
 cargo xtask <command>
 
 commands:
-  reproduce-fig3 [--quick] [--extras]
+  reproduce-fig3 [--quick] [--extras] [--portable]
                        the convergence-domain protocol of the paper (§3, Fig. 3) on the
                        synthetic city: fixtures/protocol-fig3.toml (--quick: the CI subset
                        fixtures/protocol-fig3-quick.toml; --extras: also the methods beyond
                        the paper). Results (CSV, summary.md, cdf.png/svg) in results/fig3*/,
                        checked for consistency.
-  reproduce-fig4 [--quick]
+  reproduce-fig4 [--quick] [--portable]
                        tracking by successive alignments (§4, Fig. 4): a shaken sequence
                        through the synthetic city tracked by PoT and PGMoT with 1 frame in
                        N, fixtures/sequence-fig4.toml (--quick: fixtures/sequence-fig4-quick.toml).
                        Results (frames.csv, summary.md, plots, overlays) in results/fig4*/,
                        checked for consistency.
+
+  Both build bench-conv in release mode for this machine's instruction set
+  (-C target-cpu=native, in target/native): the same numbers bit for bit, about 20 %
+  sooner. --portable builds it for the baseline instruction set instead.
   fixtures [--check]   write fixtures/*.toml from their definition in xtask/src/fixtures.rs
                        (--check: fail if the committed files differ)
   help                 this text
@@ -70,24 +76,27 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
             Ok(())
         }
         "reproduce-fig3" => {
-            let mut quick = false;
-            let mut extras = false;
+            let (mut quick, mut extras, mut build) = (false, false, Build::Native);
             for flag in rest {
                 match flag.as_str() {
                     "--quick" => quick = true,
                     "--extras" => extras = true,
+                    "--portable" => build = Build::Portable,
                     other => bail!("unknown flag `{other}`\n\n{HELP}"),
                 }
             }
-            reproduce::fig3(quick, extras)
+            reproduce::fig3(quick, extras, build)
         }
         "reproduce-fig4" => {
-            let quick = match rest {
-                [] => false,
-                [flag] if flag == "--quick" => true,
-                _ => bail!("usage: cargo xtask reproduce-fig4 [--quick]"),
-            };
-            reproduce::fig4(quick)
+            let (mut quick, mut build) = (false, Build::Native);
+            for flag in rest {
+                match flag.as_str() {
+                    "--quick" => quick = true,
+                    "--portable" => build = Build::Portable,
+                    other => bail!("unknown flag `{other}`\n\n{HELP}"),
+                }
+            }
+            reproduce::fig4(quick, build)
         }
         "help" | "--help" | "-h" => {
             print!("{HELP}");

@@ -9,12 +9,38 @@ use bench_conv::report::{read_csv, summarize};
 
 use crate::project_root;
 
+/// How `bench-conv` is compiled for a reproduction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Build {
+    /// For the instruction set of the machine that runs it (`-C target-cpu=native`, in
+    /// its own target folder `target/native`): the reproduction runs where it is built.
+    /// The numbers are the same as the portable build's, bit for bit: Rust never fuses
+    /// or reorders floating-point operations, so wider vector instructions compute the
+    /// same IEEE operations (CI compares the two builds' quick Fig. 3).
+    Native,
+    /// For the baseline instruction set of the target, like any `cargo build`.
+    Portable,
+}
+
 /// `cargo run --release -p bench-conv -- <args>` from the project root.
-fn bench_conv(args: &[&std::ffi::OsStr]) -> anyhow::Result<()> {
+fn bench_conv(args: &[&std::ffi::OsStr], build: Build) -> anyhow::Result<()> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
+    let mut command = Command::new(cargo);
+    command
         .current_dir(project_root())
-        .args(["run", "--release", "--quiet", "-p", "bench-conv", "--"])
+        .args(["run", "--release", "--quiet", "-p", "bench-conv"]);
+    if build == Build::Native {
+        let target = std::env::var_os("CARGO_TARGET_DIR")
+            .map_or_else(|| project_root().join("target"), Into::into);
+        let mut flags = std::env::var("RUSTFLAGS").unwrap_or_default();
+        flags.push_str(" -C target-cpu=native");
+        command
+            .arg("--target-dir")
+            .arg(target.join("native"))
+            .env("RUSTFLAGS", flags.trim_start());
+    }
+    let status = command
+        .arg("--")
         .args(args)
         .status()
         .context("running bench-conv")?;
@@ -23,7 +49,7 @@ fn bench_conv(args: &[&std::ffi::OsStr]) -> anyhow::Result<()> {
 }
 
 /// Run the tracking experiment of Fig. 4 (or its quick subset) and check the results.
-pub fn fig4(quick: bool) -> anyhow::Result<()> {
+pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
     let (sequence, out) = if quick {
         (
@@ -36,12 +62,15 @@ pub fn fig4(quick: bool) -> anyhow::Result<()> {
             root.join("results/fig4"),
         )
     };
-    bench_conv(&[
-        "track".as_ref(),
-        sequence.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-    ])?;
+    bench_conv(
+        &[
+            "track".as_ref(),
+            sequence.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ],
+        build,
+    )?;
     check_fig4(&sequence, &out)?;
     println!(
         "checked: {} is consistent with {}",
@@ -119,7 +148,7 @@ fn ensure_files<S: AsRef<std::path::Path>>(
 }
 
 /// Run the Fig. 3 protocol (or its quick subset) and check the result files.
-pub fn fig3(quick: bool, extras: bool) -> anyhow::Result<()> {
+pub fn fig3(quick: bool, extras: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
     let (protocol_path, out) = if quick {
         (
@@ -141,7 +170,7 @@ pub fn fig3(quick: bool, extras: bool) -> anyhow::Result<()> {
     if extras {
         args.push("--extras".as_ref());
     }
-    bench_conv(&args)?;
+    bench_conv(&args, build)?;
     check(&protocol_path, &out, quick, extras)?;
     println!(
         "checked: {} is consistent with {}",

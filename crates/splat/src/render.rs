@@ -339,6 +339,8 @@ impl Renderer {
         self.splats.resize(candidate_points, Splat::default());
         self.draw.clear();
         let mut points_drawn = 0;
+        // Splats that may add a sample, compacted at the front of `self.splats`.
+        let mut splats_kept = 0;
         let mut cells_occluded = 0;
         let mut next = 0;
         while next < self.candidates.len() {
@@ -357,8 +359,8 @@ impl Renderer {
                 batch_points += candidate.cell.count as usize;
             }
             let cells = &self.draw[first..];
-            let splats = &mut self.splats[points_drawn..points_drawn + batch_points];
-            draw_depth(
+            let splats = &mut self.splats[splats_kept..splats_kept + batch_points];
+            splats_kept += draw_depth(
                 cloud.points(),
                 cells,
                 &view,
@@ -369,7 +371,7 @@ impl Renderer {
             );
             points_drawn += batch_points;
         }
-        let splats = &self.splats[..points_drawn];
+        let splats = &self.splats[..splats_kept];
         if parallel {
             splats
                 .par_chunks(16_384)
@@ -632,7 +634,9 @@ impl Renderer {
 
 /// Pass 1 over a batch of cells, on rayon's threads if `parallel`: chunks of cells of
 /// similar work, each with its own run of splat slots; atomics make the result
-/// independent of the order.
+/// independent of the order. Returns the number of slots of `splats` that pass 2 must
+/// read (on one thread, the splats that may add a sample are moved to the front; on
+/// several, the others are marked [`NOT_DRAWN`]).
 fn draw_depth(
     points: &[[f32; 4]],
     cells: &[DrawCell],
@@ -641,11 +645,11 @@ fn draw_depth(
     depth: &[AtomicU32],
     splats: &mut [Splat],
     parallel: bool,
-) {
+) -> usize {
     if !parallel {
-        project_and_depth(points, cells, view, camera, depth, splats, false);
-        return;
+        return project_and_depth(points, cells, view, camera, depth, splats, false);
     }
+    let total = splats.len();
     let chunks = chunk_cells(cells, 16_384);
     let mut slices = Vec::with_capacity(chunks.len());
     let mut rest = splats;
@@ -656,8 +660,12 @@ fn draw_depth(
         rest = tail;
     }
     slices.par_iter_mut().for_each(|(cells, splats)| {
-        project_and_depth(points, cells, view, camera, depth, splats, true);
+        let kept = project_and_depth(points, cells, view, camera, depth, splats, true);
+        for s in &mut splats[kept..] {
+            s.half = NOT_DRAWN;
+        }
     });
+    total
 }
 
 /// A projected point, written by pass 1 and read by pass 2 (12 bytes).
@@ -856,24 +864,41 @@ impl Splat {
     }
 }
 
-/// Take the minimum of `key` and the depth of each pixel of a splat.
+/// Take the minimum of the splat's range and the depth of each pixel it covers.
+/// Returns whether the splat may still add a sample in pass 2: not if every pixel
+/// already held a range below its band (depths only decrease, so pass 2 would reject
+/// it everywhere; the test is pass 2's own, on a depth at least the final one).
 #[inline(always)]
-fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) {
+fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) -> bool {
     let key = s.range.to_bits();
+    let limit = band_limit(s.range, view);
+    let mut hidden = true;
     s.for_each_pixel(view, |k| {
         let cell = &depth[k];
-        if atomic {
-            cell.fetch_min(key, Ordering::Relaxed);
+        let before = if atomic {
+            cell.fetch_min(key, Ordering::Relaxed)
         } else {
             // Branch-free: whether a point is nearer is unpredictable.
-            cell.store(key.min(cell.load(Ordering::Relaxed)), Ordering::Relaxed);
-        }
+            let before = cell.load(Ordering::Relaxed);
+            cell.store(key.min(before), Ordering::Relaxed);
+            before
+        };
+        // An empty pixel's key is a NaN: never below the limit.
+        hidden &= f32::from_bits(before) < limit;
     });
+    !hidden
 }
 
-/// Pass 1 over the points of some cells: project each point once, keep its splat in
-/// `splats` (one slot per drawn point, in draw order), and take the minimum depth key
-/// over its footprint.
+/// Pass 2 keeps a sample of range `range_m` at the pixels whose nearest range is at
+/// least this (the sample is within the depth band of the nearest).
+#[inline(always)]
+fn band_limit(range_m: f32, view: &View) -> f32 {
+    range_m / (1.0 + view.depth_band)
+}
+
+/// Pass 1 over the points of some cells: project each point once, take the minimum
+/// depth key over its footprint, and keep its splat in `splats` if it may add a sample
+/// (in draw order, from the front). Returns the number kept.
 #[inline(always)]
 fn project_and_depth(
     points: &[[f32; 4]],
@@ -883,8 +908,9 @@ fn project_and_depth(
     depth: &[AtomicU32],
     splats: &mut [Splat],
     atomic: bool,
-) {
+) -> usize {
     let mut slot = 0;
+    let mut kept = 0;
     let mut block = [Splat::default(); BLOCK];
     let mut input = [[0f32; 4]; BLOCK];
     for cell in cells {
@@ -918,10 +944,17 @@ fn project_and_depth(
                 });
             }
         }
-        for s in out.iter().filter(|s| s.half != NOT_DRAWN) {
-            splat_depth(s, view, depth, atomic);
+        // Compact in place: `kept` never passes the slot being read.
+        for k in slot - cell_points.len()..slot {
+            let s = splats[k];
+            if s.half != NOT_DRAWN {
+                let visible = splat_depth(&s, view, depth, atomic);
+                splats[kept] = s;
+                kept += usize::from(visible);
+            }
         }
     }
+    kept
 }
 
 /// Pass 2 over the splats of pass 1: add each sample to the pixels it covers where it
@@ -938,7 +971,7 @@ fn accumulate(
         let sample = (u64::from(s.intensity) << COUNT_BITS) | 1;
         // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
         let range_sample = (s.range * RANGE_SCALE + 0.5) as i64 as u64;
-        let limit = s.range / (1.0 + view.depth_band);
+        let limit = band_limit(s.range, view);
         s.for_each_pixel(view, |k| {
             let near = f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit;
             let [slot, range] = &accum[k];
