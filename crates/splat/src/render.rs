@@ -1107,19 +1107,14 @@ mod tests {
             let mut tail = [Splat::default(); TAIL];
             let first: &[[f32; 4]; TAIL] = points[..TAIL].try_into().unwrap();
             project_block(first, footprint, &view, &mut tail);
-            let both = block.iter().zip(tail.iter().chain(&block[TAIL..]));
-            for (p, (got, got_tail)) in points.iter().zip(both) {
-                prop_assert_eq!(
-                    (got.iu, got.iv, got.half, got.intensity, got.range.to_bits()),
-                    (got_tail.iu, got_tail.iv, got_tail.half, got_tail.intensity, got_tail.range.to_bits())
-                );
+            let fields = |s: &Splat| (s.iu, s.iv, s.half, s.intensity, s.range.to_bits());
+            for (t, b) in tail.iter().zip(&block) {
+                prop_assert_eq!(fields(t), fields(b));
+            }
+            for (p, got) in points.iter().zip(&block) {
                 match project_point(p, footprint, &view, &camera) {
                     Some(want) => {
-                        prop_assert_eq!(
-                            (got.iu, got.iv, got.half, got.intensity, got.range.to_bits()),
-                            (want.iu, want.iv, want.half, want.intensity, want.range.to_bits()),
-                            "point {:?}", p
-                        );
+                        prop_assert_eq!(fields(got), fields(&want), "point {:?}", p);
                     }
                     None => prop_assert_eq!(got.half, NOT_DRAWN, "point {:?}", p),
                 }
