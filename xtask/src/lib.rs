@@ -30,6 +30,13 @@ commands:
                        fixtures/protocol-fig3-quick.toml; --extras: also the methods beyond
                        the paper). Results (CSV, summary.md, cdf.png/svg) in results/fig3*/,
                        checked for consistency.
+  reproduce-global [--quick] [--portable]
+                       global localisation inside the prior box (beyond the paper, method
+                       `global`): fixtures/protocol-global.toml (the 448 poses of Fig. 3 at
+                       the paper's offsets and at half of them) and
+                       fixtures/protocol-global-uniform.toml (starts drawn inside the box);
+                       --quick: fixtures/protocol-global-quick.toml. Results in
+                       results/global*/.
   reproduce-fig4 [--quick] [--portable]
                        tracking by successive alignments (§4, Fig. 4): a shaken sequence
                        through the synthetic city tracked by PoT and PGMoT with 1 frame in
@@ -86,6 +93,17 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
                 }
             }
             reproduce::fig3(quick, extras, build)
+        }
+        "reproduce-global" => {
+            let (mut quick, mut build) = (false, Build::Native);
+            for flag in rest {
+                match flag.as_str() {
+                    "--quick" => quick = true,
+                    "--portable" => build = Build::Portable,
+                    other => bail!("unknown flag `{other}`\n\n{HELP}"),
+                }
+            }
+            reproduce::global(quick, build)
         }
         "reproduce-fig4" => {
             let (mut quick, mut build) = (false, Build::Native);

@@ -161,6 +161,39 @@ pub fn fig3(quick: bool, extras: bool, build: Build) -> anyhow::Result<()> {
             root.join("results/fig3"),
         )
     };
+    run_protocol(&protocol_path, &out, extras, build)?;
+    check(&protocol_path, &out, quick, extras)
+}
+
+/// Run the global localisation protocols (method `global`, beyond the paper): the
+/// paper's poses at the corners of the box and at half of them, and starts drawn
+/// uniformly inside it (or the quick subset), and check the result files.
+pub fn global(quick: bool, build: Build) -> anyhow::Result<()> {
+    let root = project_root();
+    let runs: &[(&str, &str)] = if quick {
+        &[("protocol-global-quick.toml", "global-quick")]
+    } else {
+        &[
+            ("protocol-global.toml", "global"),
+            ("protocol-global-uniform.toml", "global-uniform"),
+        ]
+    };
+    for (protocol, out) in runs {
+        let protocol_path = root.join("fixtures").join(protocol);
+        let out = root.join("results").join(out);
+        run_protocol(&protocol_path, &out, false, build)?;
+        check(&protocol_path, &out, false, false)?;
+    }
+    Ok(())
+}
+
+/// `bench-conv run PROTOCOL --out OUT [--extras]`.
+fn run_protocol(
+    protocol_path: &std::path::Path,
+    out: &std::path::Path,
+    extras: bool,
+    build: Build,
+) -> anyhow::Result<()> {
     let mut args = vec![
         "run".as_ref(),
         protocol_path.as_os_str(),
@@ -170,18 +203,12 @@ pub fn fig3(quick: bool, extras: bool, build: Build) -> anyhow::Result<()> {
     if extras {
         args.push("--extras".as_ref());
     }
-    bench_conv(&args, build)?;
-    check(&protocol_path, &out, quick, extras)?;
-    println!(
-        "checked: {} is consistent with {}",
-        out.display(),
-        protocol_path.display()
-    );
-    Ok(())
+    bench_conv(&args, build)
 }
 
-/// The result files exist, every method has one row per (desired, initial) pose, and
-/// in quick mode: PoVS fails from 8 m, Rule2 succeeds at least as often as Rule0.
+/// The result files exist, every method has one row per (desired, scale, initial)
+/// pose, and in quick mode: PoVS fails from 8 m, Rule2 succeeds at least as often as
+/// Rule0.
 pub fn check(
     protocol_path: &std::path::Path,
     out: &std::path::Path,
@@ -190,9 +217,13 @@ pub fn check(
 ) -> anyhow::Result<()> {
     ensure_files(out, &["runs.csv", "summary.md", "cdf.png", "cdf.svg"])?;
     let protocol = Protocol::load(protocol_path)?;
+    if protocol.offsets.scales.len() > 1 {
+        ensure_files(out, &["domain.csv", "domain.png", "domain.svg"])?;
+    }
     let records = read_csv(&out.join("runs.csv"))?;
     let methods = protocol.method_configs(extras)?;
-    let per_method = protocol.desired.len() * protocol.initial_indices().len();
+    let per_method =
+        protocol.desired.len() * protocol.offsets.scales.len() * protocol.initial_indices().len();
     ensure!(
         records.len() == per_method * methods.len(),
         "{} rows, expected {} ({} per method)",
@@ -244,5 +275,10 @@ pub fn check(
             "Rule2 succeeded less often than Rule0 on the quick subset"
         );
     }
+    println!(
+        "checked: {} is consistent with {}",
+        out.display(),
+        protocol_path.display()
+    );
     Ok(())
 }

@@ -14,9 +14,16 @@
 //! spacing_m = 0.05
 //! # kind = "las", path = "cloud.laz"  # any LAS/LAZ file, relative to this file
 //!
-//! [offsets]                           # every sign combination, in the desired camera's frame
+//! [offsets]                           # in the desired camera's frame
 //! translation_m = [8.0, 2.0, 1.5]     # tX (along the street), tY (across), tZ (vertical)
 //! rotation_deg = [10.0, 10.0, 15.0]   # θwX, θwY (tilts), θwZ (yaw)
+//! # sampling = "corners"              # corners (64, the paper's), axes (12), uniform (64)
+//! # scales = [0.25, 0.5, 0.75, 1.0]   # every initial pose at each scale of the offsets
+//! # seed = 1                          # of the uniform draws
+//!
+//! # [prior]                           # the box of method "global" (default: [offsets])
+//! # translation_m = [8.0, 2.0, 1.5]
+//! # rotation_deg = [10.0, 10.0, 15.0]
 //!
 //! [[desired]]                         # world_from_camera of each desired camera, either
 //! looking_down = [-40.0, 0.5, 3.0, 0.0]  # x, y, z (m) and heading (deg) of a camera looking down
@@ -32,16 +39,24 @@
 //! vvs = { levenberg_marquardt = 0.01 }
 //! ```
 //!
-//! Initial pose `i` (0–63) of a desired pose takes the sign `−` for component `k` of
-//! `(tX, tY, tZ, θwX, θwY, θwZ)` where bit `k` of `i` is set: `initial = desired ·
-//! (t, θw)`, i.e. the offsets are applied in the desired camera's frame.
+//! Every initial pose is `initial = desired · (t, θw)`, the offsets applied in the
+//! desired camera's frame, each component scaled by the scale of the run:
+//!
+//! * `corners` (the paper's): initial pose `i` (0–63) takes the sign `−` for component
+//!   `k` of `(tX, tY, tZ, θwX, θwY, θwZ)` where bit `k` of `i` is set, the magnitude of
+//!   `[offsets]` for every component;
+//! * `axes`: initial pose `i` (0–11) offsets component `i / 2` alone, positive for even
+//!   `i`, negative for odd (the basin along each axis);
+//! * `uniform`: initial pose `i` (0–63) draws every component uniformly within
+//!   `±[offsets]` (seeded by `seed`, the desired pose and `i`): starts anywhere inside
+//!   the box rather than at its corners.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use ucm::Isometry3;
-use vvs::{JacobianKind, Method, VvsConfig};
+use vvs::{JacobianKind, Method, PriorBox, VvsConfig};
 
 /// A parsed protocol file.
 #[derive(Clone, Debug, Deserialize)]
@@ -67,6 +82,9 @@ pub struct Protocol {
     pub offsets: Offsets,
     /// Desired poses.
     pub desired: Vec<DesiredPose>,
+    /// The prior box of [`Method::Global`] (default: the unscaled `[offsets]`).
+    #[serde(default)]
+    pub prior: Option<PriorBox>,
     /// Optimiser settings.
     #[serde(default)]
     pub vvs: toml::Table,
@@ -177,6 +195,42 @@ pub struct Offsets {
     pub translation_m: [f64; 3],
     /// `|θwX|, |θwY|, |θwZ|`, degrees.
     pub rotation_deg: [f64; 3],
+    /// How the initial poses are drawn.
+    #[serde(default)]
+    pub sampling: Sampling,
+    /// Scales of the offsets: every initial pose is run at each (the domain curve).
+    #[serde(default = "default_scales")]
+    pub scales: Vec<f64>,
+    /// Seed of the `uniform` draws.
+    #[serde(default)]
+    pub seed: u64,
+}
+
+fn default_scales() -> Vec<f64> {
+    vec![1.0]
+}
+
+/// How the initial poses are drawn from `[offsets]` (module docs).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Sampling {
+    /// The 64 sign combinations of the offsets (the paper's).
+    #[default]
+    Corners,
+    /// The 12 offsets along one axis, both signs.
+    Axes,
+    /// 64 offsets drawn uniformly within the box.
+    Uniform,
+}
+
+impl Sampling {
+    /// How many initial poses a desired pose has.
+    pub fn count(self) -> usize {
+        match self {
+            Sampling::Corners | Sampling::Uniform => 64,
+            Sampling::Axes => 12,
+        }
+    }
 }
 
 /// A desired pose.
@@ -229,7 +283,9 @@ pub struct RunSpec {
     pub id: usize,
     /// Index of the desired pose.
     pub desired: usize,
-    /// Index of the initial pose (0–63).
+    /// Index of the offset scale in `[offsets] scales`.
+    pub scale: usize,
+    /// Index of the initial pose (0–63 or 0–11, see [`Sampling`]).
     pub initial: usize,
     /// Index of the method configuration.
     pub method: usize,
@@ -257,10 +313,25 @@ impl Protocol {
         if !(self.success_threshold_m > 0.0) {
             bail!("success_threshold_m must be > 0");
         }
+        let count = self.offsets.sampling.count();
         if let Some(indices) = &self.initial_indices
-            && let Some(bad) = indices.iter().find(|&&i| i >= 64)
+            && let Some(bad) = indices.iter().find(|&&i| i >= count)
         {
-            bail!("initial index {bad} is not in 0..64");
+            bail!("initial index {bad} is not in 0..{count}");
+        }
+        if self.offsets.scales.is_empty() {
+            bail!("[offsets] scales is empty");
+        }
+        if let Some(bad) = self
+            .offsets
+            .scales
+            .iter()
+            .find(|s| !(**s > 0.0 && **s <= 100.0))
+        {
+            bail!("offset scale {bad} is not in (0, 100]");
+        }
+        if let Some(prior) = &self.prior {
+            prior.validate()?;
         }
         for (k, d) in self.desired.iter().enumerate() {
             self.desired_pose(k)
@@ -288,17 +359,41 @@ impl Protocol {
         }
     }
 
-    /// The offset `(t, θw)` of initial pose `index` (bit k set: component k negative).
-    pub fn offset(&self, index: usize) -> [f64; 6] {
+    /// The offset `(t, θw)` of initial pose `index` of desired pose `desired`, at
+    /// offset scale `scale` (a factor, not an index; see the module docs).
+    pub fn offset(&self, desired: usize, index: usize, scale: f64) -> [f64; 6] {
         let t = self.offsets.translation_m;
         let r = self.offsets.rotation_deg.map(f64::to_radians);
-        let mag = [t[0], t[1], t[2], r[0], r[1], r[2]];
-        std::array::from_fn(|k| if index >> k & 1 == 1 { -mag[k] } else { mag[k] })
+        let mag = [t[0], t[1], t[2], r[0], r[1], r[2]].map(|m| m * scale);
+        match self.offsets.sampling {
+            Sampling::Corners => {
+                std::array::from_fn(|k| if index >> k & 1 == 1 { -mag[k] } else { mag[k] })
+            }
+            Sampling::Axes => std::array::from_fn(|k| {
+                let sign = if index % 2 == 1 { -1.0 } else { 1.0 };
+                if k == index / 2 { sign * mag[k] } else { 0.0 }
+            }),
+            Sampling::Uniform => {
+                let mut rng = splat::rng::SplitMix64::new(self.offsets.seed)
+                    .fork(desired as u64)
+                    .fork(index as u64);
+                std::array::from_fn(|k| rng.uniform(-mag[k], mag[k]))
+            }
+        }
     }
 
-    /// `world_from_camera` of initial pose `index` of desired pose `k`.
-    pub fn initial_pose(&self, k: usize, index: usize) -> anyhow::Result<Isometry3> {
-        Ok(self.desired_pose(k)? * Isometry3::from_pose_vector(self.offset(index))?)
+    /// `world_from_camera` of initial pose `index` of desired pose `k` at offset scale
+    /// `scale` (a factor).
+    pub fn initial_pose(&self, k: usize, index: usize, scale: f64) -> anyhow::Result<Isometry3> {
+        Ok(self.desired_pose(k)? * Isometry3::from_pose_vector(self.offset(k, index, scale))?)
+    }
+
+    /// The prior box of [`Method::Global`]: `[prior]`, or the unscaled `[offsets]`.
+    pub fn prior_box(&self) -> PriorBox {
+        self.prior.clone().unwrap_or(PriorBox {
+            translation_m: self.offsets.translation_m,
+            rotation_deg: self.offsets.rotation_deg,
+        })
     }
 
     /// The method configurations, in order (paper methods, then variants if `extras`).
@@ -314,13 +409,15 @@ impl Protocol {
                 });
             } else {
                 for &j in &self.jacobians {
+                    let mut config = VvsConfig {
+                        jacobian: j.kind(),
+                        ..base.clone()
+                    };
+                    config.global.prior = self.prior_box();
                     out.push(MethodConfig {
                         name: format!("{}/{}", method.name(), j.kind().name()),
                         method,
-                        config: VvsConfig {
-                            jacobian: j.kind(),
-                            ..base.clone()
-                        },
+                        config,
                     });
                 }
             }
@@ -330,6 +427,7 @@ impl Protocol {
                 let mut config =
                     merge_config(&base, &v.vvs).with_context(|| format!("variant {}", v.name))?;
                 config.jacobian = v.jacobian.kind();
+                config.global.prior = self.prior_box();
                 out.push(MethodConfig {
                     name: v.name.clone(),
                     method: v.method,
@@ -344,22 +442,25 @@ impl Protocol {
     pub fn initial_indices(&self) -> Vec<usize> {
         self.initial_indices
             .clone()
-            .unwrap_or_else(|| (0..64).collect())
+            .unwrap_or_else(|| (0..self.offsets.sampling.count()).collect())
     }
 
-    /// Every run, in a stable order: desired, initial, method.
+    /// Every run, in a stable order: desired, scale, initial, method.
     pub fn runs(&self, extras: bool) -> anyhow::Result<Vec<RunSpec>> {
         let methods = self.method_configs(extras)?.len();
         let mut runs = Vec::new();
         for desired in 0..self.desired.len() {
-            for initial in self.initial_indices() {
-                for method in 0..methods {
-                    runs.push(RunSpec {
-                        id: runs.len(),
-                        desired,
-                        initial,
-                        method,
-                    });
+            for scale in 0..self.offsets.scales.len() {
+                for initial in self.initial_indices() {
+                    for method in 0..methods {
+                        runs.push(RunSpec {
+                            id: runs.len(),
+                            desired,
+                            scale,
+                            initial,
+                            method,
+                        });
+                    }
                 }
             }
         }

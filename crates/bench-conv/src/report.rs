@@ -16,7 +16,9 @@ pub struct RunRecord {
     pub scene: String,
     /// Desired pose index.
     pub desired: usize,
-    /// Initial pose index (0–63).
+    /// Scale of the protocol's offsets for this run (1: as written).
+    pub offset_scale: f64,
+    /// Initial pose index (0–63, or 0–11 along the axes).
     pub initial: usize,
     /// Method configuration name.
     pub method: String,
@@ -41,7 +43,7 @@ pub struct RunRecord {
     pub success: bool,
 }
 
-const HEADER: &str = "run_id,scene,desired,initial,method,final_position_error_m,final_rotation_error_deg,iterations_step1,iterations_step2,stop,lambda,cost,wall_time_s,success";
+const HEADER: &str = "run_id,scene,desired,offset_scale,initial,method,final_position_error_m,final_rotation_error_deg,iterations_step1,iterations_step2,stop,lambda,cost,wall_time_s,success";
 
 /// Write records as CSV.
 pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
@@ -50,10 +52,11 @@ pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
     for r in records {
         writeln!(
             text,
-            "{},{},{},{},{},{:.6e},{:.6e},{},{},{},{},{:.6e},{:.3},{}",
+            "{},{},{},{},{},{},{:.6e},{:.6e},{},{},{},{},{:.6e},{:.3},{}",
             r.run_id,
             r.scene,
             r.desired,
+            r.offset_scale,
             r.initial,
             r.method,
             r.final_position_error_m,
@@ -86,9 +89,9 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(n, line)| {
             let f: Vec<&str> = line.split(',').collect();
-            if f.len() != 14 {
+            if f.len() != 15 {
                 bail!(
-                    "{}:{}: {} fields, expected 14",
+                    "{}:{}: {} fields, expected 15",
                     path.display(),
                     n + 2,
                     f.len()
@@ -99,17 +102,18 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
                 run_id: f[0].parse().with_context(ctx)?,
                 scene: f[1].to_string(),
                 desired: f[2].parse().with_context(ctx)?,
-                initial: f[3].parse().with_context(ctx)?,
-                method: f[4].to_string(),
-                final_position_error_m: f[5].parse().with_context(ctx)?,
-                final_rotation_error_deg: f[6].parse().with_context(ctx)?,
-                iterations_step1: f[7].parse().with_context(ctx)?,
-                iterations_step2: f[8].parse().with_context(ctx)?,
-                stop: f[9].to_string(),
-                lambda: f[10].parse().with_context(ctx)?,
-                cost: f[11].parse().with_context(ctx)?,
-                wall_time_s: f[12].parse().with_context(ctx)?,
-                success: f[13].parse().with_context(ctx)?,
+                offset_scale: f[3].parse().with_context(ctx)?,
+                initial: f[4].parse().with_context(ctx)?,
+                method: f[5].to_string(),
+                final_position_error_m: f[6].parse().with_context(ctx)?,
+                final_rotation_error_deg: f[7].parse().with_context(ctx)?,
+                iterations_step1: f[8].parse().with_context(ctx)?,
+                iterations_step2: f[9].parse().with_context(ctx)?,
+                stop: f[10].to_string(),
+                lambda: f[11].parse().with_context(ctx)?,
+                cost: f[12].parse().with_context(ctx)?,
+                wall_time_s: f[13].parse().with_context(ctx)?,
+                success: f[14].parse().with_context(ctx)?,
             })
         })
         .collect()
@@ -331,4 +335,212 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
         crate::plot::line(&mut chart, points, label, color.stroke_width(2))?;
     }
     crate::plot::finish(&mut chart, &root)
+}
+
+/// The success of one method at one offset scale: a point of the domain curve.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DomainPoint {
+    /// Method configuration name.
+    pub method: String,
+    /// Scale of the protocol's offsets.
+    pub offset_scale: f64,
+    /// Runs at this scale.
+    pub runs: usize,
+    /// Successful runs.
+    pub successes: usize,
+}
+
+impl DomainPoint {
+    /// Success rate, percent.
+    pub fn rate(&self) -> f64 {
+        100.0 * self.successes as f64 / self.runs.max(1) as f64
+    }
+}
+
+/// The domain curve: success by method and offset scale (methods by name, scales
+/// increasing).
+pub fn domain(records: &[RunRecord]) -> Vec<DomainPoint> {
+    let mut groups: BTreeMap<(&str, u64), (f64, usize, usize)> = BTreeMap::new();
+    for r in records {
+        // Scales are positive, so their bits order as the values.
+        let entry = groups
+            .entry((&r.method, r.offset_scale.to_bits()))
+            .or_insert((r.offset_scale, 0, 0));
+        entry.1 += 1;
+        entry.2 += usize::from(r.success);
+    }
+    groups
+        .into_iter()
+        .map(
+            |((method, _), (offset_scale, runs, successes))| DomainPoint {
+                method: method.to_string(),
+                offset_scale,
+                runs,
+                successes,
+            },
+        )
+        .collect()
+}
+
+fn scales_of(points: &[DomainPoint]) -> Vec<f64> {
+    let mut scales: Vec<f64> = points.iter().map(|p| p.offset_scale).collect();
+    scales.sort_by(f64::total_cmp);
+    scales.dedup();
+    scales
+}
+
+/// The domain curve as a Markdown table: a row per method, a column per scale.
+pub fn domain_markdown(points: &[DomainPoint]) -> String {
+    let scales = scales_of(points);
+    let mut s = String::from("| method |");
+    for scale in &scales {
+        let _ = write!(s, " s = {scale} |");
+    }
+    s.push_str("\n|---|");
+    s.push_str(&"---:|".repeat(scales.len()));
+    s.push('\n');
+    let mut methods: Vec<&str> = points.iter().map(|p| p.method.as_str()).collect();
+    methods.dedup();
+    for method in methods {
+        let _ = write!(s, "| {method} |");
+        for scale in &scales {
+            match points
+                .iter()
+                .find(|p| p.method == method && p.offset_scale == *scale)
+            {
+                Some(p) => {
+                    let _ = write!(s, " {:.1} % ({}/{}) |", p.rate(), p.successes, p.runs);
+                }
+                None => s.push_str(" — |"),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Write the domain curve as CSV (`method,offset_scale,runs,successes,success_percent`).
+pub fn write_domain_csv(path: &Path, points: &[DomainPoint]) -> anyhow::Result<()> {
+    let mut text = String::from("method,offset_scale,runs,successes,success_percent\n");
+    for p in points {
+        let _ = writeln!(
+            text,
+            "{},{},{},{},{:.2}",
+            p.method,
+            p.offset_scale,
+            p.runs,
+            p.successes,
+            p.rate()
+        );
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Plot the domain curve (success against offset scale, a line per method) as PNG and
+/// SVG.
+pub fn plot_domain(points: &[DomainPoint], png: &Path, svg: &Path) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    crate::register_font();
+    draw_domain(
+        BitMapBackend::new(png, (900, 600)).into_drawing_area(),
+        points,
+    )
+    .with_context(|| format!("plotting {}", png.display()))?;
+    draw_domain(SVGBackend::new(svg, (900, 600)).into_drawing_area(), points)
+        .with_context(|| format!("plotting {}", svg.display()))?;
+    Ok(())
+}
+
+fn draw_domain<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    points: &[DomainPoint],
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let largest = scales_of(points).last().copied().unwrap_or(1.0);
+    root.fill(&WHITE).map_err(crate::plot::error)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Convergence domain: success against the scale of the offsets",
+            ("sans-serif", 20),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0f64..largest * 1.05, 0.0f64..105.0)
+        .map_err(crate::plot::error)?;
+    chart
+        .configure_mesh()
+        .x_desc("offset scale s (1: the paper's ±8 m, ±2 m, ±1.5 m, ±10°, ±10°, ±15°)")
+        .y_desc("runs converged (%)")
+        .draw()
+        .map_err(crate::plot::error)?;
+    let mut methods: Vec<&str> = points.iter().map(|p| p.method.as_str()).collect();
+    methods.dedup();
+    for (i, method) in methods.into_iter().enumerate() {
+        let line: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| p.method == method)
+            .map(|p| (p.offset_scale, p.rate()))
+            .collect();
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(
+                line.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 3, color.filled())),
+            )
+            .map_err(crate::plot::error)?;
+        crate::plot::line(&mut chart, line, method, color.stroke_width(2))?;
+    }
+    crate::plot::finish(&mut chart, &root)
+}
+
+/// The basin along each axis (protocols with `sampling = "axes"`): per method and
+/// axis, the largest scale `s` such that every run along that axis (both signs, every
+/// desired pose) converged at `s` and at every smaller scale run; 0 if none.
+pub fn axis_basins(records: &[RunRecord]) -> Vec<(String, [f64; 6])> {
+    let mut methods: Vec<&str> = records.iter().map(|r| r.method.as_str()).collect();
+    methods.sort_unstable();
+    methods.dedup();
+    let mut scales: Vec<f64> = records.iter().map(|r| r.offset_scale).collect();
+    scales.sort_by(f64::total_cmp);
+    scales.dedup();
+    methods
+        .into_iter()
+        .map(|method| {
+            let basin = std::array::from_fn(|axis| {
+                let mut largest = 0.0;
+                for &scale in &scales {
+                    let all = records
+                        .iter()
+                        .filter(|r| {
+                            r.method == method && r.initial / 2 == axis && r.offset_scale == scale
+                        })
+                        .all(|r| r.success);
+                    if !all {
+                        break;
+                    }
+                    largest = scale;
+                }
+                largest
+            });
+            (method.to_string(), basin)
+        })
+        .collect()
+}
+
+/// [`axis_basins`] as a Markdown table in metres and degrees (`magnitudes`: the
+/// protocol's offsets at scale 1, `tX, tY, tZ` in metres then `θwX, θwY, θwZ` in
+/// degrees).
+pub fn axis_basins_markdown(basins: &[(String, [f64; 6])], magnitudes: [f64; 6]) -> String {
+    let mut s = String::from(
+        "| method | tX (m) | tY (m) | tZ (m) | θwX (°) | θwY (°) | θwZ (°) |\n|---|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for (method, basin) in basins {
+        let _ = write!(s, "| {method} |");
+        for k in 0..6 {
+            let _ = write!(s, " {:.2} |", basin[k] * magnitudes[k]);
+        }
+        s.push('\n');
+    }
+    s
 }

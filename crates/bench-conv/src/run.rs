@@ -67,7 +67,7 @@ pub fn run_protocol(
     for r in &runs {
         for pose in [
             protocol.desired_pose(r.desired)?,
-            protocol.initial_pose(r.desired, r.initial)?,
+            protocol.initial_pose(r.desired, r.initial, protocol.offsets.scales[r.scale])?,
         ] {
             let p = pose.translation;
             anyhow::ensure!(
@@ -91,7 +91,7 @@ pub fn run_protocol(
     for r in &runs {
         let partner = jobs.iter_mut().rev().take(methods.len()).find(|job| {
             let first = job[0];
-            (first.desired, first.initial) == (r.desired, r.initial)
+            (first.desired, first.scale, first.initial) == (r.desired, r.scale, r.initial)
                 && shares_step1(first.method)
                 && shares_step1(r.method)
                 && methods[first.method].config == methods[r.method].config
@@ -125,8 +125,9 @@ pub fn run_protocol(
                 }
                 let servo = &mut servo_slot.as_mut().expect("set above").1;
                 let (desired, initial) = (job[0].desired, job[0].initial);
+                let offset_scale = protocol.offsets.scales[job[0].scale];
                 let desired_pose = protocol.desired_pose(desired)?;
-                let initial_pose = protocol.initial_pose(desired, initial)?;
+                let initial_pose = protocol.initial_pose(desired, initial, offset_scale)?;
                 let job_methods: Vec<Method> =
                     job.iter().map(|r| methods[r.method].method).collect();
                 let outcomes =
@@ -139,6 +140,7 @@ pub fn run_protocol(
                         run_id: spec.id,
                         scene: scene_name.to_string(),
                         desired,
+                        offset_scale,
                         initial,
                         method: methods[spec.method].name.clone(),
                         final_position_error_m: dt,

@@ -57,12 +57,19 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
         "protocol-fig3.toml",
         "protocol-fig3-quick.toml",
         "protocol-fig3-lambda30.toml",
+        "protocol-global.toml",
+        "protocol-global-uniform.toml",
+        "protocol-global-quick.toml",
     ] {
         let p = Protocol::load(&root().join("fixtures").join(name)).unwrap();
         assert!(!p.runs(true).unwrap().is_empty());
         for d in 0..p.desired.len() {
-            for i in p.initial_indices() {
-                let pose = p.initial_pose(d, i).unwrap();
+            for (i, &scale) in p
+                .initial_indices()
+                .into_iter()
+                .flat_map(|i| p.offsets.scales.iter().map(move |s| (i, s)))
+            {
+                let pose = p.initial_pose(d, i, scale).unwrap();
                 let t = pose.translation;
                 // Inside a 7 m road of one of the two streets, at least 1 m above it.
                 let across = if t.x.abs() > 6.0 { t.y } else { t.x };
@@ -82,10 +89,11 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
     assert_eq!(full.method_configs(false).unwrap().len(), 7);
     assert_eq!(full.runs(false).unwrap().len(), 7 * 448);
     // Offsets: index 0 all positive, 63 all negative, in the desired camera's frame.
-    assert_eq!(full.offset(0)[0], 8.0);
-    assert_eq!(full.offset(63)[2], -1.5);
+    assert_eq!(full.offset(0, 0, 1.0)[0], 8.0);
+    assert_eq!(full.offset(0, 63, 1.0)[2], -1.5);
+    assert_eq!(full.offset(0, 63, 0.5)[2], -0.75);
     let d = full.desired_pose(0).unwrap();
-    let i = full.initial_pose(0, 1).unwrap();
+    let i = full.initial_pose(0, 1, 1.0).unwrap();
     assert!(
         ((i.translation - d.translation).x + 8.0).abs() < 1e-9,
         "tX is along the street (camera X = world X)"
@@ -223,4 +231,126 @@ fn the_papers_rates_stand_beside_its_configurations_only() {
     assert_eq!(paper_success_rate("rule2/convolved+lm"), None);
     assert_eq!(paper_success_rate("rule2/convolved+no-stall"), None);
     assert_eq!(paper_success_rate("my-method"), None);
+}
+
+/// `axes` offsets move one component, `uniform` ones stay within the box and are
+/// reproducible, and every initial pose runs at every scale.
+#[test]
+fn samplings_and_scales_draw_the_documented_offsets() {
+    let dir = temp("samplings");
+    let path = tiny_protocol(&dir);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let axes_text = text.replace("initial_indices = [0, 5, 63]", "").replace(
+        "rotation_deg = [1.0, 1.0, 2.0]",
+        "rotation_deg = [1.0, 1.0, 2.0]\nsampling = \"axes\"\nscales = [0.5, 1.0, 2.0]",
+    );
+    std::fs::write(dir.join("axes.toml"), axes_text).unwrap();
+    let axes = Protocol::load(&dir.join("axes.toml")).unwrap();
+    assert_eq!(axes.initial_indices().len(), 12);
+    // 1 desired × 3 scales × 12 initial poses × 5 configurations (with the variant).
+    assert_eq!(axes.runs(true).unwrap().len(), 3 * 12 * 5);
+    let mag = [
+        0.3,
+        0.1,
+        0.1,
+        1f64.to_radians(),
+        1f64.to_radians(),
+        2f64.to_radians(),
+    ];
+    for i in 0..12 {
+        let o = axes.offset(0, i, 2.0);
+        for k in 0..6 {
+            let expected = if k == i / 2 {
+                if i % 2 == 0 {
+                    2.0 * mag[k]
+                } else {
+                    -2.0 * mag[k]
+                }
+            } else {
+                0.0
+            };
+            assert!((o[k] - expected).abs() < 1e-12, "initial {i}: {o:?}");
+        }
+    }
+    let uniform_text = text.replace(
+        "rotation_deg = [1.0, 1.0, 2.0]",
+        "rotation_deg = [1.0, 1.0, 2.0]\nsampling = \"uniform\"\nseed = 3",
+    );
+    std::fs::write(dir.join("uniform.toml"), uniform_text).unwrap();
+    let uniform = Protocol::load(&dir.join("uniform.toml")).unwrap();
+    let draws: Vec<[f64; 6]> = (0..64).map(|i| uniform.offset(0, i, 1.0)).collect();
+    for o in &draws {
+        assert!((0..6).all(|k| o[k].abs() <= mag[k]), "{o:?}");
+    }
+    assert_eq!(draws[5], uniform.offset(0, 5, 1.0), "reproducible");
+    assert_ne!(draws[5], draws[6]);
+    assert_ne!(
+        draws[5],
+        uniform.offset(1, 5, 1.0),
+        "each desired pose draws its own"
+    );
+    // Not at the corners: some component well inside the box.
+    assert!(draws.iter().any(|o| o[0].abs() < 0.5 * mag[0]));
+    // An index beyond the sampling's count is refused.
+    let bad = std::fs::read_to_string(dir.join("axes.toml"))
+        .unwrap()
+        .replace("methods =", "initial_indices = [12]\nmethods =");
+    std::fs::write(dir.join("bad.toml"), bad).unwrap();
+    let message = format!("{:#}", Protocol::load(&dir.join("bad.toml")).unwrap_err());
+    assert!(message.contains("0..12"), "{message}");
+}
+
+/// The domain curve and the axis basins count what the records say.
+#[test]
+fn domain_curve_and_axis_basins_count_the_records() {
+    use bench_conv::report::{RunRecord, axis_basins, domain, domain_markdown};
+    let record = |method: &str, scale: f64, initial: usize, success: bool| RunRecord {
+        run_id: 0,
+        scene: "s".into(),
+        desired: 0,
+        offset_scale: scale,
+        initial,
+        method: method.into(),
+        final_position_error_m: if success { 0.001 } else { 3.0 },
+        final_rotation_error_deg: 0.0,
+        iterations_step1: 1,
+        iterations_step2: 1,
+        stop: "converged".into(),
+        lambda: 1.0,
+        cost: 0.0,
+        wall_time_s: 0.0,
+        success,
+    };
+    let mut records = Vec::new();
+    for &scale in &[0.5, 1.0, 2.0] {
+        for initial in 0..12 {
+            // Method a: every axis converges up to 1, axis 0 (initials 0 and 1) to 2,
+            // and axis 5's negative side fails from 0.5 already.
+            let a = scale <= 1.0 || initial < 2;
+            let a = a && !(initial == 11);
+            records.push(record("a", scale, initial, a));
+            records.push(record("b", scale, initial, false));
+        }
+    }
+    let points = domain(&records);
+    assert_eq!(points.len(), 6);
+    let a_half = points
+        .iter()
+        .find(|p| p.method == "a" && p.offset_scale == 0.5)
+        .unwrap();
+    assert_eq!((a_half.runs, a_half.successes), (12, 11));
+    let a_two = points
+        .iter()
+        .find(|p| p.method == "a" && p.offset_scale == 2.0)
+        .unwrap();
+    assert_eq!(a_two.successes, 2);
+    let table = domain_markdown(&points);
+    assert!(
+        table.contains("s = 0.5") && table.contains("91.7 % (11/12)"),
+        "{table}"
+    );
+    let basins = axis_basins(&records);
+    assert_eq!(basins[0].0, "a");
+    assert_eq!(basins[0].1, [2.0, 1.0, 1.0, 1.0, 1.0, 0.0]);
+    assert_eq!(basins[1].1, [0.0; 6]);
 }

@@ -18,10 +18,15 @@ pub enum Method {
     Rule1,
     /// PGM: step 1 as Rule1; step 2 with λ starting at λ*₂, optimised.
     Rule2,
+    /// Beyond the paper: global localisation inside a prior region
+    /// ([`crate::global`], settings in [`VvsConfig::global`]): a low-resolution search
+    /// over a grid of the region, then [`crate::GlobalConfig::refine_method`] from the
+    /// best few.
+    Global,
 }
 
 impl Method {
-    /// Every method, in the paper's order of presentation.
+    /// The paper's methods, in its order of presentation.
     pub const ALL: [Method; 4] = [Method::Povs, Method::Rule0, Method::Rule1, Method::Rule2];
 
     /// Short name (`povs`, `rule0`, …).
@@ -31,6 +36,7 @@ impl Method {
             Method::Rule0 => "rule0",
             Method::Rule1 => "rule1",
             Method::Rule2 => "rule2",
+            Method::Global => "global",
         }
     }
 }
@@ -138,6 +144,8 @@ pub struct VvsConfig {
     pub pgm_stride: u32,
     /// Renderer level of detail (pixels between drawn points), `None` for every point.
     pub lod_spacing_px: Option<f32>,
+    /// Beyond the paper: the settings of [`Method::Global`].
+    pub global: crate::GlobalConfig,
     /// Keep the per-iteration history in the outcome.
     pub keep_history: bool,
     /// Render and transform each image on rayon's threads. The results are the same
@@ -170,6 +178,7 @@ impl Default for VvsConfig {
             normalize: false,
             pgm_stride: 1,
             lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
+            global: crate::GlobalConfig::default(),
             keep_history: true,
             parallel: true,
         }
@@ -258,6 +267,16 @@ impl VvsConfig {
                 format!(
                     "{} iterations cannot cover {stages} step-1 stages",
                     self.step1_max_iterations
+                ),
+            );
+        }
+        self.global.validate()?;
+        let search_lambda = self.lambda_star_step1 / self.global.search_downsampling as f32;
+        if !pgm::LAMBDA_RANGE.contains(&search_lambda) {
+            return bad(
+                "global.search_downsampling",
+                format!(
+                    "λ*₁ at the search's resolution would be {search_lambda} px, outside [0.5, 40]"
                 ),
             );
         }

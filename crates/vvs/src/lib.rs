@@ -3,11 +3,13 @@
 
 mod config;
 mod error;
+pub mod global;
 mod outcome;
 mod servo;
 pub mod solve;
 
 pub use config::{JacobianKind, Method, Robust, VvsConfig};
 pub use error::VvsError;
+pub use global::{GlobalConfig, PriorBox, SearchReport};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use servo::Servo;

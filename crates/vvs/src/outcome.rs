@@ -87,6 +87,10 @@ pub struct Outcome {
     /// Per-iteration history (empty if not kept).
     pub history: Vec<IterationRecord>,
     /// Time spent in the stages, seconds (a step 1 shared by
-    /// [`crate::Servo::run_methods`] counts in full for every method sharing it).
+    /// [`crate::Servo::run_methods`] counts in full for every method sharing it; a
+    /// global search counts all of its phases).
     pub time_s: f64,
+    /// What the global search did ([`crate::Method::Global`] only).
+    #[serde(default)]
+    pub search: Option<crate::SearchReport>,
 }

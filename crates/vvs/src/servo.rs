@@ -8,6 +8,7 @@ use pgm::{Pgm, PgmOptions};
 use splat::{Frame, PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 
+use crate::global::{PriorBox, SearchReport};
 use crate::solve::solve;
 use crate::{
     Divergence, IterationRecord, Method, Outcome, Robust, StopReason, VvsConfig, VvsError,
@@ -86,6 +87,7 @@ pub struct Servo<'a> {
     weights: Vec<f32>,
     rows7: Vec<[f32; 7]>,
     scratch: Vec<f32>,
+    search_desired: Vec<f32>,
 }
 
 impl<'a> Servo<'a> {
@@ -116,6 +118,7 @@ impl<'a> Servo<'a> {
             weights: Vec::new(),
             rows7: Vec::new(),
             scratch: Vec::new(),
+            search_desired: Vec::new(),
         })
     }
 
@@ -214,16 +217,7 @@ impl<'a> Servo<'a> {
         Ok(outcomes.pop().expect("one outcome per method"))
     }
 
-    /// Align with several methods from the same `initial` pose: one outcome per method,
-    /// each exactly what [`Servo::run`] returns for it. Methods whose step 1 is the same
-    /// (Rule1 and Rule2) run it once: step 2 of each starts from the shared result,
-    /// and each outcome's `time_s` counts the shared step in full.
-    pub fn run_methods(
-        &mut self,
-        methods: &[Method],
-        desired: &Frame,
-        initial: Isometry3,
-    ) -> Result<Vec<Outcome>, VvsError> {
+    fn check_inputs(&self, desired: &Frame, initial: &Isometry3) -> Result<(), VvsError> {
         if desired.width() != self.camera.width() || desired.height() != self.camera.height() {
             return Err(VvsError::DesiredSize {
                 got_width: desired.width(),
@@ -235,6 +229,213 @@ impl<'a> Servo<'a> {
         if !initial.is_finite() {
             return Err(VvsError::NonFinitePose);
         }
+        Ok(())
+    }
+
+    /// Global localisation (beyond the paper, [`crate::global`]): the pose at which the
+    /// cloud looks like `desired`, searched for in the `prior` region around `initial`
+    /// (`world_from_camera`) with the settings of [`VvsConfig::global`] (whose own
+    /// `prior` is ignored here). [`Method::Global`] is this call with that `prior`.
+    pub fn localize_in_box(
+        &mut self,
+        desired: &Frame,
+        initial: Isometry3,
+        prior: &PriorBox,
+    ) -> Result<Outcome, VvsError> {
+        self.check_inputs(desired, &initial)?;
+        prior.validate()?;
+        let started = Instant::now();
+        let settings = self.config.global.clone();
+        let search = self.search_level()?;
+        let factor = settings.search_downsampling;
+        let desired_small = if factor == 1 {
+            desired.clone()
+        } else {
+            desired.downsampled(factor, &self.levels[search].camera)?
+        };
+        let lambda = self.config.lambda_star_step1 / factor as f32;
+
+        // Screening: the cost of every node at low resolution.
+        self.search_desired.clear();
+        let g_star = self.levels[search].pgm.transform(&desired_small, lambda)?;
+        self.search_desired.extend_from_slice(g_star);
+        let nodes = prior.grid(settings.grid_spacing_m);
+        let mut screened: Vec<(f64, usize)> = Vec::with_capacity(nodes.len());
+        for (index, node) in nodes.iter().enumerate() {
+            let pose = initial * Isometry3::from_translation(DVec3::from_array(*node));
+            let cost = self.search_cost(search, &pose, lambda)?;
+            if cost.is_finite() {
+                screened.push((cost, index));
+            }
+        }
+        screened.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        screened.truncate(settings.screened);
+
+        // Descents of the best, at low resolution.
+        let planned = Planned {
+            stage: Stage::Pgm {
+                lambda_star: lambda,
+                lambda_start: lambda,
+                optimise_lambda: true,
+            },
+            step: 1,
+            level: search,
+            cap: settings.descent_iterations,
+            last_of_step: true,
+        };
+        let mut descended: Vec<(f64, usize, Isometry3)> = Vec::with_capacity(screened.len());
+        let mut descent_iterations = 0;
+        let mut history = Vec::new();
+        for &(_, index) in &screened {
+            let mut pose = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
+            history.clear();
+            let (stop, _, cost, count) = self.run_stage(
+                planned,
+                settings.descent_iterations,
+                &desired_small,
+                &mut pose,
+                &mut history,
+            )?;
+            descent_iterations += count;
+            if !matches!(stop, StopReason::Diverged(_)) && cost.is_finite() {
+                descended.push((cost, index, pose));
+            }
+        }
+        descended.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut kept: Vec<(usize, Isometry3)> = Vec::with_capacity(settings.refined);
+        for &(_, index, pose) in &descended {
+            if kept.len() == settings.refined {
+                break;
+            }
+            let duplicate = kept.iter().any(|(_, other)| {
+                (pose.translation - other.translation).length() < settings.merge_distance_m
+            });
+            if !duplicate {
+                kept.push((index, pose));
+            }
+        }
+        if kept.is_empty() {
+            // Every node diverged: refine the initial pose, which says how.
+            kept.push((usize::MAX, initial));
+        }
+
+        // Refinements at full resolution: the lowest final cost wins.
+        let mut best: Option<(usize, Outcome)> = None;
+        let mut refined_costs = Vec::with_capacity(kept.len());
+        for (rank, &(_, pose)) in kept.iter().enumerate() {
+            let mut outcome = self.run_methods(&[settings.refine_method], desired, pose)?;
+            let outcome = outcome.pop().expect("one outcome per method");
+            let cost = match outcome.stop {
+                StopReason::Diverged(_) => f64::INFINITY,
+                _ if outcome.cost.is_finite() => outcome.cost,
+                _ => f64::INFINITY,
+            };
+            refined_costs.push(cost);
+            let better = match &best {
+                None => true,
+                Some((r, _)) => cost < refined_costs[*r],
+            };
+            if better {
+                best = Some((rank, outcome));
+            }
+        }
+        let (chosen_rank, mut outcome) = best.expect("at least one refinement");
+        let chosen = kept[chosen_rank].0;
+        outcome.search = Some(SearchReport {
+            candidates: nodes.len(),
+            descents: screened.len(),
+            refinements: kept.len(),
+            descent_iterations,
+            chosen_node_m: nodes.get(chosen).copied().unwrap_or([0.0; 3]),
+            chosen_rank,
+            refined_costs,
+        });
+        outcome.time_s = started.elapsed().as_secs_f64();
+        Ok(outcome)
+    }
+
+    /// The index of the global search's low-resolution level, built on first use.
+    fn search_level(&mut self) -> Result<usize, VvsError> {
+        let factor = self.config.global.search_downsampling;
+        if factor == 1 {
+            return Ok(0);
+        }
+        let index = self.config.pyramid_levels as usize;
+        if self.levels.len() == index {
+            let camera = self
+                .camera
+                .downsampled(factor)
+                .map_err(|e| VvsError::Config {
+                    name: "global.search_downsampling",
+                    message: e.to_string(),
+                })?;
+            self.levels.push(Level::new(camera, &self.config)?);
+        }
+        Ok(index)
+    }
+
+    /// The mean squared PGM residual at `world_from_camera` on level `level` against
+    /// `self.search_desired` (infinite where the pose is outside the cloud's enlarged
+    /// bounds or sees too little of it).
+    fn search_cost(
+        &mut self,
+        level: usize,
+        world_from_camera: &Isometry3,
+        lambda: f32,
+    ) -> Result<f64, VvsError> {
+        let (lo, hi) = self.bounds;
+        let margin = DVec3::splat(self.config.bounds_margin_m);
+        let p = world_from_camera.translation;
+        if p.cmplt(lo - margin).any() || p.cmpgt(hi + margin).any() {
+            return Ok(f64::INFINITY);
+        }
+        let Level {
+            camera,
+            renderer,
+            frame,
+            pgm,
+            ..
+        } = &mut self.levels[level];
+        let stats = renderer.render(self.cloud, &world_from_camera.inverse(), frame)?;
+        let valid = camera.valid_pixel_count().max(1) as f64;
+        if (stats.pixels_hit as f64) / valid < self.config.min_hit_fraction {
+            return Ok(f64::INFINITY);
+        }
+        let g = pgm.transform(frame, lambda)?;
+        let n = g.len().max(1) as f64;
+        let sum: f64 = g
+            .iter()
+            .zip(&self.search_desired)
+            .map(|(&a, &b)| {
+                let e = f64::from(a - b);
+                e * e
+            })
+            .sum();
+        Ok(sum / n)
+    }
+
+    /// Align with several methods from the same `initial` pose: one outcome per method,
+    /// each exactly what [`Servo::run`] returns for it. Methods whose step 1 is the same
+    /// (Rule1 and Rule2) run it once: step 2 of each starts from the shared result,
+    /// and each outcome's `time_s` counts the shared step in full.
+    pub fn run_methods(
+        &mut self,
+        methods: &[Method],
+        desired: &Frame,
+        initial: Isometry3,
+    ) -> Result<Vec<Outcome>, VvsError> {
+        if let [Method::Global] = methods {
+            let prior = self.config.global.prior.clone();
+            return Ok(vec![self.localize_in_box(desired, initial, &prior)?]);
+        }
+        if methods.contains(&Method::Global) {
+            let mut outcomes = Vec::with_capacity(methods.len());
+            for &method in methods {
+                outcomes.extend(self.run_methods(&[method], desired, initial)?);
+            }
+            return Ok(outcomes);
+        }
+        self.check_inputs(desired, &initial)?;
         let rule0_start = self.config.rule0_lambda_factor * self.config.lambda_star_step1;
         if methods.contains(&Method::Rule0) && !pgm::LAMBDA_RANGE.contains(&rule0_start) {
             return Err(VvsError::Config {
@@ -243,8 +444,9 @@ impl<'a> Servo<'a> {
             });
         }
         // The desired image at each pyramid level.
-        let mut coarse_desired = Vec::with_capacity(self.levels.len() - 1);
-        for level in &self.levels[1..] {
+        let pyramid = self.config.pyramid_levels as usize;
+        let mut coarse_desired = Vec::with_capacity(pyramid - 1);
+        for level in &self.levels[1..pyramid] {
             let factor = self.camera.width() / level.camera.width();
             coarse_desired.push(desired.downsampled(factor, &level.camera)?);
         }
@@ -276,6 +478,7 @@ impl<'a> Servo<'a> {
                         iterations: [0; 2],
                         history: Vec::new(),
                         time_s: 0.0,
+                        search: None,
                     };
                     let outcome =
                         self.run_stages(step1, budgets, desired, &coarse_desired, start)?;

@@ -75,13 +75,23 @@ fn invalid_input_is_a_typed_error() {
         translation: glam::DVec3::NAN,
         ..Isometry3::IDENTITY
     };
+    for method in [Method::Rule2, Method::Global] {
+        assert!(matches!(
+            servo.run(method, &desired, nan),
+            Err(VvsError::NonFinitePose)
+        ));
+        assert!(matches!(
+            servo.run(method, &Frame::new(4, 4), desired_pose()),
+            Err(VvsError::DesiredSize { .. })
+        ));
+    }
+    let lying_box = vvs::PriorBox {
+        translation_m: [f64::INFINITY, 0.0, 0.0],
+        rotation_deg: [0.0; 3],
+    };
     assert!(matches!(
-        servo.run(Method::Rule2, &desired, nan),
-        Err(VvsError::NonFinitePose)
-    ));
-    assert!(matches!(
-        servo.run(Method::Rule2, &Frame::new(4, 4), desired_pose()),
-        Err(VvsError::DesiredSize { .. })
+        servo.localize_in_box(&desired, desired_pose(), &lying_box),
+        Err(VvsError::Config { .. })
     ));
     let bad = VvsConfig {
         gain: 0.0,

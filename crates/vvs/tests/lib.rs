@@ -6,3 +6,4 @@ mod common;
 mod config;
 mod convergence;
 mod degenerate;
+mod global;

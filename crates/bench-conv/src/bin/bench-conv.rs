@@ -120,11 +120,39 @@ fn write_results(
     records: &[bench_conv::report::RunRecord],
     threshold_m: f64,
     wall_time_s: Option<f64>,
+    axes: Option<[f64; 6]>,
 ) -> anyhow::Result<()> {
     use bench_conv::report;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     report::write_csv(&out.join("runs.csv"), records)?;
-    let summary = report::summary_markdown(title, records, threshold_m, wall_time_s);
+    let mut summary = report::summary_markdown(title, records, threshold_m, wall_time_s);
+    let domain = report::domain(records);
+    if domain
+        .iter()
+        .any(|p| p.offset_scale != domain[0].offset_scale)
+    {
+        summary.push_str(
+            "
+## Success against the scale of the offsets
+
+",
+        );
+        summary.push_str(&report::domain_markdown(&domain));
+        report::write_domain_csv(&out.join("domain.csv"), &domain)?;
+        report::plot_domain(&domain, &out.join("domain.png"), &out.join("domain.svg"))?;
+    }
+    if let Some(magnitudes) = axes {
+        summary.push_str(
+            "
+## Basin along each axis alone
+
+The largest offset of those run from which every run along the axis (both signs, every desired pose) converged, at that and every smaller offset.\n\n",
+        );
+        summary.push_str(&report::axis_basins_markdown(
+            &report::axis_basins(records),
+            magnitudes,
+        ));
+    }
     std::fs::write(out.join("summary.md"), &summary)?;
     report::plot_cdf(
         records,
@@ -164,6 +192,13 @@ fn main() -> anyhow::Result<()> {
                 &records,
                 protocol.success_threshold_m,
                 Some(started.elapsed().as_secs_f64()),
+                (protocol.offsets.sampling == bench_conv::protocol::Sampling::Axes).then(|| {
+                    let (t, r) = (
+                        protocol.offsets.translation_m,
+                        protocol.offsets.rotation_deg,
+                    );
+                    [t[0], t[1], t[2], r[0], r[1], r[2]]
+                }),
             )?;
         }
         Command::Track { sequence, out } => {
@@ -215,7 +250,7 @@ fn main() -> anyhow::Result<()> {
                 .map(|p| bench_conv::report::read_csv(p))
                 .collect::<anyhow::Result<Vec<_>>>()?;
             let records = bench_conv::report::merge(parts)?;
-            write_results(&out, "merged", &records, threshold_m, None)?;
+            write_results(&out, "merged", &records, threshold_m, None, None)?;
         }
         Command::City {
             out,

@@ -1,0 +1,242 @@
+//! Global localisation inside a prior region (beyond the paper): [`Method::Global`].
+//!
+//! The paper's rules are local: from ±8 m along the street they converge only where the
+//! PGM cost at λ* has no other minimum on the way (`docs/RESULTS.md`: on our city the
+//! basin of Rule2 ends near half of the paper's offsets). A robot rarely starts blind,
+//! though: a GPS fix and a compass bound its pose to a box. Inside such a box this
+//! search finds the pose in three phases, every one deterministic:
+//!
+//! 1. **Candidates.** The positions the truth can take relative to the initial pose
+//!    (the box's translation corners, turned by the box's rotation corners, see
+//!    [`PriorBox`]) are covered by a regular grid of at most
+//!    [`GlobalConfig::grid_spacing_m`] between nodes; each node keeps the initial
+//!    orientation (the paper's rules recover ±10°/±10°/±15° from a start whose
+//!    position is close enough: `docs/RESULTS.md`).
+//! 2. **Screening and descents, at low resolution.** Every candidate is scored by the
+//!    PGM cost at λ*₁ on an image [`GlobalConfig::search_downsampling`] times smaller
+//!    (λ scaled alike, so the same angular blur); the [`GlobalConfig::screened`] best
+//!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
+//!    and are ranked again by their cost; descents that end within
+//!    [`GlobalConfig::merge_distance_m`] of a better one are dropped as duplicates.
+//! 3. **Refinement.** The [`GlobalConfig::refined`] best run
+//!    [`GlobalConfig::refine_method`] at full resolution; the outcome with the lowest
+//!    final cost wins (a diverged one never does).
+//!
+//! The outcome is that of the winning refinement, with a [`SearchReport`] of what the
+//! search did and its whole time in `time_s`.
+
+use serde::{Deserialize, Serialize};
+use ucm::Isometry3;
+
+use crate::{Method, VvsError};
+
+/// The prior region of a global localisation: how far the initial pose may be from the
+/// truth. It is the error model of the paper's protocol: `initial = truth · (t, θw)`
+/// with `|t_k| ≤ translation_m[k]` and `|θw_k| ≤ rotation_deg[k]` (the paper's pose
+/// vector, in the true camera's frame), so the truth lies at the corner of the box when
+/// every offset is at its largest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PriorBox {
+    /// Largest `|tX|, |tY|, |tZ|`, metres.
+    pub translation_m: [f64; 3],
+    /// Largest `|θwX|, |θwY|, |θwZ|`, degrees.
+    pub rotation_deg: [f64; 3],
+}
+
+impl Default for PriorBox {
+    /// The paper's offsets (§3.1): ±8 m, ±2 m, ±1.5 m and ±10°, ±10°, ±15°.
+    fn default() -> Self {
+        Self {
+            translation_m: [8.0, 2.0, 1.5],
+            rotation_deg: [10.0, 10.0, 15.0],
+        }
+    }
+}
+
+impl PriorBox {
+    /// Check the box: finite, non-negative, rotations below 90°.
+    pub fn validate(&self) -> Result<(), VvsError> {
+        let bad = |message: String| {
+            Err(VvsError::Config {
+                name: "global.prior",
+                message,
+            })
+        };
+        for t in self.translation_m {
+            if !(t >= 0.0 && t <= 1e4) {
+                return bad(format!("translations must be in [0, 10000] m, got {t}"));
+            }
+        }
+        for r in self.rotation_deg {
+            if !(r >= 0.0 && r < 90.0) {
+                return bad(format!("rotations must be in [0, 90) degrees, got {r}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The half-extents, along the initial camera's axes, of the positions the truth
+    /// can take relative to the initial pose: the largest `|p_k|` of
+    /// `p = translation of (t, θw)⁻¹` over the box's corners (a box of 8 m turned by
+    /// 15° reaches 4 m across).
+    pub fn position_extent_m(&self) -> [f64; 3] {
+        let r = self.rotation_deg.map(f64::to_radians);
+        let t = self.translation_m;
+        let mut extent = [0.0f64; 3];
+        for corner in 0..64u32 {
+            let sign = |k: u32| if corner >> k & 1 == 1 { -1.0 } else { 1.0 };
+            let offset = [
+                sign(0) * t[0],
+                sign(1) * t[1],
+                sign(2) * t[2],
+                sign(3) * r[0],
+                sign(4) * r[1],
+                sign(5) * r[2],
+            ];
+            // Rotations below 90° make a valid pose vector.
+            if let Ok(pose) = Isometry3::from_pose_vector(offset) {
+                let p = pose.inverse().translation;
+                for (e, v) in extent.iter_mut().zip([p.x, p.y, p.z]) {
+                    *e = e.max(v.abs());
+                }
+            }
+        }
+        extent
+    }
+
+    /// The candidate positions (in the initial camera's frame) of a grid covering
+    /// [`Self::position_extent_m`] with at most `spacing_m` between nodes: along each
+    /// axis `n = ⌈2e / spacing⌉ + 1` nodes from `−e` to `e` (one node at 0 when `e` is
+    /// 0). Ordered X-major, then Y, then Z.
+    pub fn grid(&self, spacing_m: [f64; 3]) -> Vec<[f64; 3]> {
+        let extent = self.position_extent_m();
+        let axis = |k: usize| -> Vec<f64> {
+            let e = extent[k];
+            if e <= 0.0 {
+                return vec![0.0];
+            }
+            let n = (2.0 * e / spacing_m[k] - 1e-9).ceil().max(1.0) as usize + 1;
+            (0..n)
+                .map(|i| -e + 2.0 * e * i as f64 / (n - 1) as f64)
+                .collect()
+        };
+        let (xs, ys, zs) = (axis(0), axis(1), axis(2));
+        let mut out = Vec::with_capacity(xs.len() * ys.len() * zs.len());
+        for &x in &xs {
+            for &y in &ys {
+                for &z in &zs {
+                    out.push([x, y, z]);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Settings of [`Method::Global`] (`VvsConfig::global`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GlobalConfig {
+    /// The prior region searched when the method is run through `Servo::run`.
+    pub prior: PriorBox,
+    /// Largest distance between grid nodes along the initial camera's X, Y, Z, metres.
+    pub grid_spacing_m: [f64; 3],
+    /// The screening and the descents run on images this many times smaller (λ*₁ too).
+    pub search_downsampling: u32,
+    /// Candidates kept after screening, each then descends.
+    pub screened: usize,
+    /// Iterations of each low-resolution descent.
+    pub descent_iterations: usize,
+    /// Descents ending this close to a better one are duplicates (metres).
+    pub merge_distance_m: f64,
+    /// Descents refined at full resolution.
+    pub refined: usize,
+    /// The method that refines them (a PGM rule or PoVS).
+    pub refine_method: Method,
+}
+
+impl Default for GlobalConfig {
+    fn default() -> Self {
+        Self {
+            prior: PriorBox::default(),
+            grid_spacing_m: [2.0, 2.0, 1.5],
+            search_downsampling: 4,
+            screened: 20,
+            descent_iterations: 10,
+            merge_distance_m: 0.5,
+            refined: 1,
+            refine_method: Method::Rule2,
+        }
+    }
+}
+
+/// The most grid nodes a search may have (a bound on its time, not on memory).
+pub const MAX_CANDIDATES: usize = 100_000;
+
+impl GlobalConfig {
+    /// Check every field against its documented range.
+    pub fn validate(&self) -> Result<(), VvsError> {
+        let bad = |name: &'static str, message: String| Err(VvsError::Config { name, message });
+        self.prior.validate()?;
+        for s in self.grid_spacing_m {
+            if !(s > 0.0 && s.is_finite()) {
+                return bad("global.grid_spacing_m", format!("must be > 0, got {s}"));
+            }
+        }
+        let extent = self.prior.position_extent_m();
+        let nodes: f64 = (0..3)
+            .map(|k| (2.0 * extent[k] / self.grid_spacing_m[k]).ceil() + 1.0)
+            .product();
+        if nodes > MAX_CANDIDATES as f64 {
+            return bad(
+                "global.grid_spacing_m",
+                format!("the prior box would need {nodes} candidates (at most {MAX_CANDIDATES})"),
+            );
+        }
+        if !(1..=16).contains(&self.search_downsampling) {
+            return bad(
+                "global.search_downsampling",
+                format!("must be in 1..=16, got {}", self.search_downsampling),
+            );
+        }
+        for (name, v) in [
+            ("global.screened", self.screened),
+            ("global.descent_iterations", self.descent_iterations),
+            ("global.refined", self.refined),
+        ] {
+            if v == 0 {
+                return bad(name, "must be >= 1".into());
+            }
+        }
+        if !(self.merge_distance_m >= 0.0 && self.merge_distance_m.is_finite()) {
+            return bad(
+                "global.merge_distance_m",
+                format!("must be >= 0, got {}", self.merge_distance_m),
+            );
+        }
+        if self.refine_method == Method::Global {
+            return bad("global.refine_method", "must be a local method".into());
+        }
+        Ok(())
+    }
+}
+
+/// What a global search did (in [`crate::Outcome::search`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SearchReport {
+    /// Grid nodes screened.
+    pub candidates: usize,
+    /// Low-resolution descents run.
+    pub descents: usize,
+    /// Full-resolution refinements run.
+    pub refinements: usize,
+    /// Iterations of every low-resolution descent together.
+    pub descent_iterations: usize,
+    /// Position of the winning node in the initial camera's frame, metres.
+    pub chosen_node_m: [f64; 3],
+    /// Rank of the winner among the refinements (0: the best descent).
+    pub chosen_rank: usize,
+    /// Final cost of every refinement, in rank order (infinite: diverged).
+    pub refined_costs: Vec<f64>,
+}
