@@ -247,8 +247,9 @@ fn samplings_and_scales_draw_the_documented_offsets() {
     std::fs::write(dir.join("axes.toml"), axes_text).unwrap();
     let axes = Protocol::load(&dir.join("axes.toml")).unwrap();
     assert_eq!(axes.initial_indices().len(), 12);
-    // 1 desired × 3 scales × 12 initial poses × 5 configurations (with the variant).
-    assert_eq!(axes.runs(true).unwrap().len(), 3 * 12 * 5);
+    // 1 desired × 3 scales × 12 initial poses × 4 configurations (PoVS, Rule2 with two
+    // Jacobians, the variant).
+    assert_eq!(axes.runs(true).unwrap().len(), 3 * 12 * 4);
     let mag = [
         0.3,
         0.1,
