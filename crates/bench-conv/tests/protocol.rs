@@ -328,7 +328,7 @@ fn domain_curve_and_axis_basins_count_the_records() {
             // Method a: every axis converges up to 1, axis 0 (initials 0 and 1) to 2,
             // and axis 5's negative side fails from 0.5 already.
             let a = scale <= 1.0 || initial < 2;
-            let a = a && !(initial == 11);
+            let a = a && initial != 11;
             records.push(record("a", scale, initial, a));
             records.push(record("b", scale, initial, false));
         }

@@ -64,12 +64,12 @@ impl PriorBox {
             })
         };
         for t in self.translation_m {
-            if !(t >= 0.0 && t <= 1e4) {
+            if !(0.0..=1e4).contains(&t) {
                 return bad(format!("translations must be in [0, 10000] m, got {t}"));
             }
         }
         for r in self.rotation_deg {
-            if !(r >= 0.0 && r < 90.0) {
+            if !(0.0..90.0).contains(&r) {
                 return bad(format!("rotations must be in [0, 90) degrees, got {r}"));
             }
         }
