@@ -24,11 +24,14 @@ const HELP: &str = "\
 cargo xtask <command>
 
 commands:
-  reproduce-fig3 [--quick] [--extras] [--portable]
+  reproduce-fig3 [--quick] [--extras] [--domain] [--portable]
                        the convergence-domain protocol of the paper (§3, Fig. 3) on the
                        synthetic city: fixtures/protocol-fig3.toml (--quick: the CI subset
                        fixtures/protocol-fig3-quick.toml; --extras: also the methods beyond
-                       the paper). Results (CSV, summary.md, cdf.png/svg) in results/fig3*/,
+                       the paper; --domain: first the domain curve at 0.25, 0.5 and 0.75 of
+                       the offsets and the basin along each axis,
+                       fixtures/protocol-fig3-{domain,axes}.toml). Results (CSV,
+                       summary.md, cdf.png/svg, domain.csv/png/svg) in results/fig3*/,
                        checked for consistency.
   reproduce-global [--quick] [--portable]
                        global localisation inside the prior box (beyond the paper, method
@@ -83,16 +86,18 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
             Ok(())
         }
         "reproduce-fig3" => {
-            let (mut quick, mut extras, mut build) = (false, false, Build::Native);
+            let (mut quick, mut extras, mut domain, mut build) =
+                (false, false, false, Build::Native);
             for flag in rest {
                 match flag.as_str() {
                     "--quick" => quick = true,
                     "--extras" => extras = true,
+                    "--domain" => domain = true,
                     "--portable" => build = Build::Portable,
                     other => bail!("unknown flag `{other}`\n\n{HELP}"),
                 }
             }
-            reproduce::fig3(quick, extras, build)
+            reproduce::fig3(quick, extras, domain, build)
         }
         "reproduce-global" => {
             let (mut quick, mut build) = (false, Build::Native);

@@ -147,8 +147,22 @@ fn ensure_files<S: AsRef<std::path::Path>>(
     Ok(())
 }
 
-/// Run the Fig. 3 protocol (or its quick subset) and check the result files.
-pub fn fig3(quick: bool, extras: bool, build: Build) -> anyhow::Result<()> {
+/// Run the Fig. 3 protocol (or its quick subset) and check the result files; with
+/// `domain`, also the domain curve below the paper's offsets and the basin along each
+/// axis (`fixtures/protocol-fig3-domain.toml`, `fixtures/protocol-fig3-axes.toml`).
+pub fn fig3(quick: bool, extras: bool, domain: bool, build: Build) -> anyhow::Result<()> {
+    if domain {
+        let root = project_root();
+        for (protocol, out) in [
+            ("protocol-fig3-domain.toml", "fig3-domain"),
+            ("protocol-fig3-axes.toml", "fig3-axes"),
+        ] {
+            let protocol_path = root.join("fixtures").join(protocol);
+            let out = root.join("results").join(out);
+            run_protocol(&protocol_path, &out, false, build)?;
+            check(&protocol_path, &out, false, false)?;
+        }
+    }
     let root = project_root();
     let (protocol_path, out) = if quick {
         (

@@ -12,6 +12,7 @@
 //! kind = "city"                       # the synthetic city: seed, spacing_m
 //! seed = 1
 //! spacing_m = 0.05
+//! # street_width_m = 12.0, clutter = true, facade_detail = true  (the ablations)
 //! # kind = "las", path = "cloud.laz"  # any LAS/LAZ file, relative to this file
 //!
 //! [offsets]                           # in the desired camera's frame
@@ -136,6 +137,15 @@ pub enum Scene {
         /// Point spacing, metres.
         #[serde(default = "default_spacing")]
         spacing_m: f64,
+        /// Facade-to-facade width of the streets, metres (default: the city's, 12).
+        #[serde(default)]
+        street_width_m: Option<f64>,
+        /// Trees, lamps and parked cars (default true).
+        #[serde(default = "yes")]
+        clutter: bool,
+        /// Windows, doors, shopfronts and the walls' fine texture (default true).
+        #[serde(default = "yes")]
+        facade_detail: bool,
     },
     /// A LAS/LAZ file.
     Las {
@@ -154,12 +164,22 @@ impl Scene {
         sampling_seed: Option<u64>,
     ) -> anyhow::Result<(splat::PointCloud, String)> {
         match self {
-            Scene::City { seed, spacing_m } => {
+            Scene::City {
+                seed,
+                spacing_m,
+                street_width_m,
+                clutter,
+                facade_detail,
+            } => {
+                let defaults = splat::city::CityParams::default();
                 let city = splat::city::City::generate(&splat::city::CityParams {
                     seed: *seed,
                     spacing_m: *spacing_m,
                     sampling_seed,
-                    ..splat::city::CityParams::default()
+                    street_width_m: street_width_m.unwrap_or(defaults.street_width_m),
+                    clutter: *clutter,
+                    facade_detail: *facade_detail,
+                    ..defaults
                 })?;
                 eprintln!(
                     "city seed {seed}: {} points in {:.1} s",
@@ -185,6 +205,10 @@ impl Scene {
 
 fn default_spacing() -> f64 {
     0.05
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// Offsets of the initial poses.

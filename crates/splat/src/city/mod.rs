@@ -61,6 +61,14 @@ pub struct CityParams {
     /// Folder of optional photographic textures (`brick.png`, `gravel.png`,
     /// `grass.png`). Default none: procedural texture only.
     pub texture_dir: Option<PathBuf>,
+    /// Street clutter: trees, lamps and parked cars along the sidewalks. Default true;
+    /// false for the ablation of what sets the convergence domain.
+    pub clutter: bool,
+    /// Facade detail: windows, doors, shopfronts, signs, shutters, balconies and the
+    /// fine texture of the walls (bricks, stones, stains, grain). Default true; false
+    /// leaves each building a plain wall of its material's colour with its cornice
+    /// (the same layout), for the ablation of what sets the convergence domain.
+    pub facade_detail: bool,
 }
 
 impl Default for CityParams {
@@ -73,6 +81,8 @@ impl Default for CityParams {
             arm_length_m: 60.0,
             sampling_seed: None,
             texture_dir: None,
+            clutter: true,
+            facade_detail: true,
         }
     }
 }
@@ -154,7 +164,9 @@ impl City {
         };
         g.ground();
         g.facades();
-        g.clutter();
+        if p.clutter {
+            g.clutter();
+        }
         let intensities: Vec<f32> = g.colors.iter().map(|&c| crate::luminance(c)).collect();
         let cloud = PointCloud::from_points(
             DVec3::ZERO,
@@ -681,8 +693,24 @@ impl Generator {
             }
         }
 
+        // Without facade detail: the same layout draws, then a plain wall.
+        let detail = self.params.facade_detail;
+        let (balconies, shutters) = if detail {
+            (balconies, shutters)
+        } else {
+            openings.clear();
+            sign = None;
+            (false, false)
+        };
         let brick = self.textures.brick.clone();
         let wall_color = move |s: f64, t: f64, rng: &mut SplitMix64| -> Rgb {
+            if !detail {
+                return match material {
+                    Material::Brick { base, .. }
+                    | Material::Render { base }
+                    | Material::Stone { base } => base,
+                };
+            }
             let grain = 0.03 * (rng.unit() - 0.5);
             match material {
                 Material::Brick { base, mortar } => {
