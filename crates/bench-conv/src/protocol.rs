@@ -354,6 +354,11 @@ impl Protocol {
         {
             bail!("offset scale {bad} is not in (0, 100]");
         }
+        let mut scales = self.offsets.scales.clone();
+        scales.sort_by(f64::total_cmp);
+        if scales.windows(2).any(|w| w[0] == w[1]) {
+            bail!("[offsets] scales lists a scale twice");
+        }
         if let Some(prior) = &self.prior {
             prior.validate()?;
         }
@@ -437,7 +442,9 @@ impl Protocol {
                         jacobian: j.kind(),
                         ..base.clone()
                     };
-                    config.global.prior = self.prior_box();
+                    if method == Method::Global {
+                        config.global.prior = self.prior_box();
+                    }
                     out.push(MethodConfig {
                         name: format!("{}/{}", method.name(), j.kind().name()),
                         method,
@@ -451,7 +458,9 @@ impl Protocol {
                 let mut config =
                     merge_config(&base, &v.vvs).with_context(|| format!("variant {}", v.name))?;
                 config.jacobian = v.jacobian.kind();
-                config.global.prior = self.prior_box();
+                if v.method == Method::Global {
+                    config.global.prior = self.prior_box();
+                }
                 out.push(MethodConfig {
                     name: v.name.clone(),
                     method: v.method,

@@ -470,7 +470,7 @@ fn draw_domain<DB: plotters::prelude::DrawingBackend>(
         .map_err(crate::plot::error)?;
     chart
         .configure_mesh()
-        .x_desc("offset scale s (1: the paper's ±8 m, ±2 m, ±1.5 m, ±10°, ±10°, ±15°)")
+        .x_desc("offset scale s (1: the protocol's offsets)")
         .y_desc("runs converged (%)")
         .draw()
         .map_err(crate::plot::error)?;
@@ -496,7 +496,8 @@ fn draw_domain<DB: plotters::prelude::DrawingBackend>(
 
 /// The basin along each axis (protocols with `sampling = "axes"`): per method and
 /// axis, the largest scale `s` such that every run along that axis (both signs, every
-/// desired pose) converged at `s` and at every smaller scale run; 0 if none.
+/// desired pose) converged at `s` and at every smaller scale run (a scale with no run
+/// along the axis ends the basin); 0 if none.
 pub fn axis_basins(records: &[RunRecord]) -> Vec<(String, [f64; 6])> {
     let mut methods: Vec<&str> = records.iter().map(|r| r.method.as_str()).collect();
     methods.sort_unstable();
@@ -510,13 +511,15 @@ pub fn axis_basins(records: &[RunRecord]) -> Vec<(String, [f64; 6])> {
             let basin = std::array::from_fn(|axis| {
                 let mut largest = 0.0;
                 for &scale in &scales {
-                    let all = records
-                        .iter()
-                        .filter(|r| {
-                            r.method == method && r.initial / 2 == axis && r.offset_scale == scale
-                        })
-                        .all(|r| r.success);
-                    if !all {
+                    let mut runs = records.iter().filter(|r| {
+                        r.method == method && r.initial / 2 == axis && r.offset_scale == scale
+                    });
+                    let mut any = false;
+                    let all = runs.all(|r| {
+                        any = true;
+                        r.success
+                    });
+                    if !(any && all) {
                         break;
                     }
                     largest = scale;

@@ -308,6 +308,12 @@ fn samplings_and_scales_draw_the_documented_offsets() {
     std::fs::write(dir.join("bad.toml"), bad).unwrap();
     let message = format!("{:#}", Protocol::load(&dir.join("bad.toml")).unwrap_err());
     assert!(message.contains("0..12"), "{message}");
+    let twice = std::fs::read_to_string(dir.join("axes.toml"))
+        .unwrap()
+        .replace("scales = [0.5, 1.0, 2.0]", "scales = [1.0, 0.5, 1.0]");
+    std::fs::write(dir.join("twice.toml"), twice).unwrap();
+    let message = format!("{:#}", Protocol::load(&dir.join("twice.toml")).unwrap_err());
+    assert!(message.contains("twice"), "{message}");
 }
 
 /// The domain curve and the axis basins count what the records say.
@@ -363,4 +369,7 @@ fn domain_curve_and_axis_basins_count_the_records() {
     assert_eq!(basins[0].0, "a");
     assert_eq!(basins[0].1, [2.0, 1.0, 1.0, 1.0, 1.0, 0.0]);
     assert_eq!(basins[1].1, [0.0; 6]);
+    // An axis with no run at a scale ends its basin there (no success from nothing).
+    records.retain(|r| !(r.initial / 2 == 1 && r.offset_scale == 1.0));
+    assert_eq!(axis_basins(&records)[0].1[1], 0.5);
 }

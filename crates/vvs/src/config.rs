@@ -21,7 +21,7 @@ pub enum Method {
     /// Beyond the paper: global localisation inside a prior region
     /// ([`crate::global`], settings in [`VvsConfig::global`]): a low-resolution search
     /// over a grid of the region, then [`crate::GlobalConfig::refine_method`] from the
-    /// best few.
+    /// best [`crate::GlobalConfig::refined`] low-resolution descents.
     Global,
 }
 
@@ -271,15 +271,6 @@ impl VvsConfig {
             );
         }
         self.global.validate()?;
-        let search_lambda = self.lambda_star_step1 / self.global.search_downsampling as f32;
-        if !pgm::LAMBDA_RANGE.contains(&search_lambda) {
-            return bad(
-                "global.search_downsampling",
-                format!(
-                    "λ*₁ at the search's resolution would be {search_lambda} px, outside [0.5, 40]"
-                ),
-            );
-        }
         if self.pgm_stride == 0 {
             return bad("pgm_stride", "must be >= 1".into());
         }

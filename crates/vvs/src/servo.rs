@@ -243,23 +243,30 @@ impl<'a> Servo<'a> {
         prior: &PriorBox,
     ) -> Result<Outcome, VvsError> {
         self.check_inputs(desired, &initial)?;
-        prior.validate()?;
-        let started = Instant::now();
         let settings = self.config.global.clone();
-        let search = self.search_level()?;
+        let nodes = prior.grid(settings.grid_spacing_m)?;
         let factor = settings.search_downsampling;
+        let lambda = self.config.lambda_star_step1 / factor as f32;
+        if !pgm::LAMBDA_RANGE.contains(&lambda) {
+            return Err(VvsError::Config {
+                name: "global.search_downsampling",
+                message: format!(
+                    "λ*₁ at the search's resolution would be {lambda} px, outside [0.5, 40]"
+                ),
+            });
+        }
+        let started = Instant::now();
+        let search = self.search_level()?;
         let desired_small = if factor == 1 {
             desired.clone()
         } else {
             desired.downsampled(factor, &self.levels[search].camera)?
         };
-        let lambda = self.config.lambda_star_step1 / factor as f32;
 
         // Screening: the cost of every node at low resolution.
         self.search_desired.clear();
         let g_star = self.levels[search].pgm.transform(&desired_small, lambda)?;
         self.search_desired.extend_from_slice(g_star);
-        let nodes = prior.grid(settings.grid_spacing_m);
         let mut screened: Vec<(f64, usize)> = Vec::with_capacity(nodes.len());
         for (index, node) in nodes.iter().enumerate() {
             let pose = initial * Isometry3::from_translation(DVec3::from_array(*node));
@@ -346,7 +353,7 @@ impl<'a> Servo<'a> {
             descents: screened.len(),
             refinements: kept.len(),
             descent_iterations,
-            chosen_node_m: nodes.get(chosen).copied().unwrap_or([0.0; 3]),
+            chosen_node_m: nodes.get(chosen).copied(),
             chosen_rank,
             refined_costs,
         });
@@ -429,11 +436,24 @@ impl<'a> Servo<'a> {
             return Ok(vec![self.localize_in_box(desired, initial, &prior)?]);
         }
         if methods.contains(&Method::Global) {
-            let mut outcomes = Vec::with_capacity(methods.len());
-            for &method in methods {
-                outcomes.extend(self.run_methods(&[method], desired, initial)?);
-            }
-            return Ok(outcomes);
+            // The global search alone, the others together (sharing their step 1).
+            let local: Vec<Method> = methods
+                .iter()
+                .copied()
+                .filter(|&m| m != Method::Global)
+                .collect();
+            let mut local = self.run_methods(&local, desired, initial)?.into_iter();
+            let global = self.run_methods(&[Method::Global], desired, initial)?;
+            return Ok(methods
+                .iter()
+                .map(|&m| {
+                    if m == Method::Global {
+                        global[0].clone()
+                    } else {
+                        local.next().expect("one outcome per local method")
+                    }
+                })
+                .collect());
         }
         self.check_inputs(desired, &initial)?;
         let rule0_start = self.config.rule0_lambda_factor * self.config.lambda_star_step1;

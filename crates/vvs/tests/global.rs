@@ -18,7 +18,7 @@ fn the_grid_covers_every_truth_of_the_box() {
         "{extent:?}"
     );
     let spacing = [2.0, 2.0, 1.5];
-    let grid = prior.grid(spacing);
+    let grid = prior.grid(spacing).unwrap();
     for k in 0..3 {
         let mut axis: Vec<f64> = grid.iter().map(|p| p[k]).collect();
         axis.sort_by(f64::total_cmp);
@@ -64,39 +64,67 @@ fn the_grid_covers_every_truth_of_the_box() {
         translation_m: [0.0; 3],
         rotation_deg: [0.0; 3],
     };
-    assert_eq!(still.grid(spacing), vec![[0.0; 3]]);
-}
-
-/// Settings out of range are refused with the field's name.
-#[test]
-fn global_settings_are_validated() {
-    let mut config = VvsConfig::default();
-    config.global.grid_spacing_m = [0.0, 2.0, 1.5];
+    assert_eq!(still.grid(spacing).unwrap(), vec![[0.0; 3]]);
+    // A large rotation box: the extent is not reached at the rotation corners (with
+    // t = (8, 2) and ±60° of yaw, |x| peaks near 14° at √(8² + 2²)).
+    let wide = PriorBox {
+        translation_m: [8.0, 2.0, 0.0],
+        rotation_deg: [0.0, 0.0, 60.0],
+    };
+    let e = wide.position_extent_m();
+    assert!((e[0] - 68f64.sqrt()).abs() < 0.01, "{e:?}");
+    // A box or spacing that would need too many nodes is refused, not allocated.
+    let huge = PriorBox {
+        translation_m: [1e4, 1e4, 1e4],
+        rotation_deg: [0.0; 3],
+    };
     assert!(
-        config
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("grid_spacing_m")
-    );
-    let mut config = VvsConfig::default();
-    config.global.grid_spacing_m = [1e-3, 1e-3, 1e-3];
-    assert!(
-        config
-            .validate()
+        huge.grid(spacing)
             .unwrap_err()
             .to_string()
             .contains("candidates")
     );
+    assert!(prior.grid([0.0, 1.0, 1.0]).is_err());
+    assert!(prior.grid([f64::NAN, 1.0, 1.0]).is_err());
+}
+
+/// Settings out of range are refused with the field's name; the box and the number of
+/// candidates it needs concern the search alone and are checked when it runs, so that
+/// the paper's methods keep every setting they had.
+#[test]
+fn global_settings_are_validated() {
     let mut config = VvsConfig::default();
-    config.global.prior.rotation_deg = [f64::NAN, 0.0, 0.0];
-    assert!(config.validate().is_err());
+    config.global.grid_spacing_m = [0.0, 2.0, 1.5];
+    let message = config.validate().unwrap_err().to_string();
+    assert!(message.contains("grid_spacing_m"), "{message}");
     let mut config = VvsConfig::default();
     config.global.refine_method = Method::Global;
     assert!(config.validate().is_err());
     let mut config = VvsConfig::default();
     config.global.search_downsampling = 64;
     assert!(config.validate().is_err());
+    // A lying box and a λ*₁ too small for the search's resolution: fine for Rule2,
+    // refused by the search.
+    let mut config = VvsConfig::default();
+    config.global.prior.rotation_deg = [f64::NAN, 0.0, 0.0];
+    config.lambda_star_step1 = 1.0;
+    config.validate().unwrap();
+    let camera = fixture();
+    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    assert!(matches!(
+        servo.run(Method::Global, &desired, desired_pose()),
+        Err(vvs::VvsError::Config { .. })
+    ));
+    let fine = PriorBox {
+        translation_m: [0.5, 0.5, 0.5],
+        rotation_deg: [1.0; 3],
+    };
+    let message = servo
+        .localize_in_box(&desired, desired_pose(), &fine)
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("search_downsampling"), "{message}");
 }
 
 fn localize(r: [f64; 6]) -> (f64, f64, vvs::Outcome) {
@@ -146,6 +174,43 @@ fn global_converges_from_the_corner_of_the_box() {
         local_dt > 0.5,
         "Rule2 alone converged from the corner: {local_dt} m"
     );
+}
+
+/// With several methods, the global search's outcome is the one it gives alone, and
+/// the others are unchanged by its company.
+#[test]
+fn global_beside_other_methods_is_what_it_is_alone() {
+    let camera = fixture();
+    let config = VvsConfig {
+        keep_history: false,
+        ..VvsConfig::default()
+    };
+    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    let mut config = VvsConfig {
+        keep_history: false,
+        ..VvsConfig::default()
+    };
+    config.global.prior = PriorBox {
+        translation_m: [1.0, 0.5, 0.3],
+        rotation_deg: [2.0; 3],
+    };
+    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
+    let start = offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]);
+    let methods = [Method::Rule2, Method::Global, Method::Povs, Method::Rule1];
+    let together = servo.run_methods(&methods, &desired, start).unwrap();
+    for (method, outcome) in methods.iter().zip(&together) {
+        let alone = servo.run(*method, &desired, start).unwrap();
+        assert_eq!(
+            outcome.world_from_camera, alone.world_from_camera,
+            "{method:?}"
+        );
+        assert_eq!(
+            (outcome.stop, outcome.iterations),
+            (alone.stop, alone.iterations)
+        );
+        assert_eq!(outcome.search.is_some(), *method == Method::Global);
+    }
 }
 
 /// From inside the box, off every grid node (the truth is not at a corner).
