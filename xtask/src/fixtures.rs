@@ -30,9 +30,14 @@ fn normalized_radius(off_axis_deg: f64) -> f64 {
     t.sin() / (t.cos() + XI)
 }
 
-/// The protocol camera, 320×240.
-pub fn camera_320x240() -> anyhow::Result<Camera> {
-    let (u0, v0) = (159.5, 119.5);
+/// The fixture camera model (ξ, focal length of the 320×240 camera) on a
+/// `width`×`height` image centred on the principal point, its valid annulus from
+/// [`INNER_OFF_NADIR_DEG`] to `outer_off_nadir_deg`.
+fn fixture_camera(width: u32, height: u32, outer_off_nadir_deg: f64) -> anyhow::Result<Camera> {
+    let (u0, v0) = (
+        (f64::from(width) - 1.0) / 2.0,
+        (f64::from(height) - 1.0) / 2.0,
+    );
     let intrinsics = Intrinsics {
         alpha_u: ALPHA_320,
         alpha_v: ALPHA_320,
@@ -45,31 +50,21 @@ pub fn camera_320x240() -> anyhow::Result<Camera> {
     let region = ValidRegion::Annulus(Annulus {
         center_px: [u0, v0],
         inner_radius_px: round(ALPHA_320 * normalized_radius(INNER_OFF_NADIR_DEG)),
-        outer_radius_px: round(ALPHA_320 * normalized_radius(OUTER_OFF_NADIR_DEG)),
+        outer_radius_px: round(ALPHA_320 * normalized_radius(outer_off_nadir_deg)),
     });
-    Ok(Camera::new(intrinsics, None, 320, 240, region)?)
+    Ok(Camera::new(intrinsics, None, width, height, region)?)
+}
+
+/// The protocol camera, 320×240.
+pub fn camera_320x240() -> anyhow::Result<Camera> {
+    fixture_camera(320, 240, OUTER_OFF_NADIR_DEG)
 }
 
 /// The wide-field ablation camera: the protocol camera's model and focal length (the
 /// same pixels per degree), its field reaching 135° off the nadir instead of 120°, on
 /// an image large enough to hold it (400×400).
 pub fn camera_wide_400x400() -> anyhow::Result<Camera> {
-    let (u0, v0) = (199.5, 199.5);
-    let intrinsics = Intrinsics {
-        alpha_u: ALPHA_320,
-        alpha_v: ALPHA_320,
-        u0,
-        v0,
-        xi: XI,
-        skew: 0.0,
-    };
-    let round = |r: f64| (r * 100.0).round() / 100.0;
-    let region = ValidRegion::Annulus(Annulus {
-        center_px: [u0, v0],
-        inner_radius_px: round(ALPHA_320 * normalized_radius(INNER_OFF_NADIR_DEG)),
-        outer_radius_px: round(ALPHA_320 * normalized_radius(WIDE_OUTER_OFF_NADIR_DEG)),
-    });
-    Ok(Camera::new(intrinsics, None, 400, 400, region)?)
+    fixture_camera(400, 400, WIDE_OUTER_OFF_NADIR_DEG)
 }
 
 /// Every fixture file: name and content.

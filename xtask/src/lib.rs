@@ -100,25 +100,11 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
             reproduce::fig3(quick, extras, domain, build)
         }
         "reproduce-global" => {
-            let (mut quick, mut build) = (false, Build::Native);
-            for flag in rest {
-                match flag.as_str() {
-                    "--quick" => quick = true,
-                    "--portable" => build = Build::Portable,
-                    other => bail!("unknown flag `{other}`\n\n{HELP}"),
-                }
-            }
+            let (quick, build) = quick_and_build(rest)?;
             reproduce::global(quick, build)
         }
         "reproduce-fig4" => {
-            let (mut quick, mut build) = (false, Build::Native);
-            for flag in rest {
-                match flag.as_str() {
-                    "--quick" => quick = true,
-                    "--portable" => build = Build::Portable,
-                    other => bail!("unknown flag `{other}`\n\n{HELP}"),
-                }
-            }
+            let (quick, build) = quick_and_build(rest)?;
             reproduce::fig4(quick, build)
         }
         "help" | "--help" | "-h" => {
@@ -127,4 +113,17 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
         }
         other => bail!("unknown command `{other}`\n\n{HELP}"),
     }
+}
+
+/// The flags `--quick` and `--portable`, the only ones of most reproductions.
+fn quick_and_build(flags: &[String]) -> anyhow::Result<(bool, Build)> {
+    let (mut quick, mut build) = (false, Build::Native);
+    for flag in flags {
+        match flag.as_str() {
+            "--quick" => quick = true,
+            "--portable" => build = Build::Portable,
+            other => bail!("unknown flag `{other}`\n\n{HELP}"),
+        }
+    }
+    Ok((quick, build))
 }

@@ -109,9 +109,7 @@ fn global_settings_are_validated() {
     config.global.prior.rotation_deg = [f64::NAN, 0.0, 0.0];
     config.lambda_star_step1 = 1.0;
     config.validate().unwrap();
-    let camera = fixture();
-    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
-    let desired = servo.render(&desired_pose()).unwrap();
+    let (mut servo, desired) = servo_with(config);
     assert!(matches!(
         servo.run(Method::Global, &desired, desired_pose()),
         Err(vvs::VvsError::Config { .. })
@@ -127,14 +125,19 @@ fn global_settings_are_validated() {
     assert!(message.contains("search_downsampling"), "{message}");
 }
 
-fn localize(r: [f64; 6]) -> (f64, f64, vvs::Outcome) {
-    let camera = fixture();
+/// An optimiser with `config` (history off) and the desired image of the tests.
+fn servo_with(config: VvsConfig) -> (Servo<'static>, splat::Frame) {
     let config = VvsConfig {
         keep_history: false,
-        ..VvsConfig::default()
+        ..config
     };
-    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
+    let mut servo = Servo::new(&city().cloud, &fixture(), config).unwrap();
     let desired = servo.render(&desired_pose()).unwrap();
+    (servo, desired)
+}
+
+fn localize(r: [f64; 6]) -> (f64, f64, vvs::Outcome) {
+    let (mut servo, desired) = servo_with(VvsConfig::default());
     let outcome = servo.run(Method::Global, &desired, offset(r)).unwrap();
     let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
     eprintln!(
@@ -165,9 +168,7 @@ fn global_converges_from_the_corner_of_the_box() {
     let search = outcome.search.expect("a global outcome reports its search");
     assert!(search.candidates > 100 && search.descents == 20 && search.refinements == 1);
     // The paper's rule from the same start ends elsewhere (the reason for the search).
-    let camera = fixture();
-    let mut servo = Servo::new(&city().cloud, &camera, VvsConfig::default()).unwrap();
-    let desired = servo.render(&desired_pose()).unwrap();
+    let (mut servo, desired) = servo_with(VvsConfig::default());
     let local = servo.run(Method::Rule2, &desired, offset(r)).unwrap();
     let (local_dt, _) = local.world_from_camera.distance_to(&desired_pose());
     assert!(
@@ -180,22 +181,12 @@ fn global_converges_from_the_corner_of_the_box() {
 /// the others are unchanged by its company.
 #[test]
 fn global_beside_other_methods_is_what_it_is_alone() {
-    let camera = fixture();
-    let config = VvsConfig {
-        keep_history: false,
-        ..VvsConfig::default()
-    };
-    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
-    let desired = servo.render(&desired_pose()).unwrap();
-    let mut config = VvsConfig {
-        keep_history: false,
-        ..VvsConfig::default()
-    };
+    let mut config = VvsConfig::default();
     config.global.prior = PriorBox {
         translation_m: [1.0, 0.5, 0.3],
         rotation_deg: [2.0; 3],
     };
-    let mut servo = Servo::new(&city().cloud, &camera, config).unwrap();
+    let (mut servo, desired) = servo_with(config);
     let start = offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]);
     let methods = [Method::Rule2, Method::Global, Method::Povs, Method::Rule1];
     let together = servo.run_methods(&methods, &desired, start).unwrap();
