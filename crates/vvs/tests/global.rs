@@ -5,6 +5,16 @@ use vvs::{Method, PriorBox, Servo, StopReason, VvsConfig};
 
 use crate::common::*;
 
+/// The corner of the paper's box with every offset positive: (t, θw) in m and rad.
+const PAPER_CORNER: [f64; 6] = [
+    8.0,
+    2.0,
+    1.5,
+    10.0 * std::f64::consts::PI / 180.0,
+    10.0 * std::f64::consts::PI / 180.0,
+    15.0 * std::f64::consts::PI / 180.0,
+];
+
 /// Every pose of the box (`initial = truth · (t, θw)`, components within the box) has
 /// its truth within the positions the grid covers, and the grid holds the box's
 /// extremes and at most the spacing between nodes.
@@ -36,14 +46,7 @@ fn the_grid_covers_every_truth_of_the_box() {
     let mut rng = splat::rng::SplitMix64::new(7);
     for i in 0..2000 {
         let r: [f64; 6] = std::array::from_fn(|k| {
-            let m = [
-                8.0,
-                2.0,
-                1.5,
-                10f64.to_radians(),
-                10f64.to_radians(),
-                15f64.to_radians(),
-            ][k];
+            let m = PAPER_CORNER[k];
             if i < 64 {
                 if i >> k & 1 == 1 { -m } else { m }
             } else {
@@ -154,14 +157,7 @@ fn localize(r: [f64; 6]) -> (f64, f64, vvs::Outcome) {
 /// does, to the millimetre.
 #[test]
 fn global_converges_from_the_corner_of_the_box() {
-    let r = [
-        8.0,
-        2.0,
-        1.5,
-        10f64.to_radians(),
-        10f64.to_radians(),
-        15f64.to_radians(),
-    ];
+    let r = PAPER_CORNER;
     let (dt, dr, outcome) = localize(r);
     assert!(dt < 0.02 && dr < 0.5, "{dt} m, {dr}°");
     assert!(!matches!(outcome.stop, StopReason::Diverged(_)));
