@@ -390,10 +390,11 @@ impl<'a> Servo<'a> {
         world_from_camera: &Isometry3,
         lambda: f32,
     ) -> Result<f64, VvsError> {
-        let (lo, hi) = self.bounds;
-        let margin = DVec3::splat(self.config.bounds_margin_m);
-        let p = world_from_camera.translation;
-        if p.cmplt(lo - margin).any() || p.cmpgt(hi + margin).any() {
+        if outside(
+            self.bounds,
+            self.config.bounds_margin_m,
+            world_from_camera.translation,
+        ) {
             return Ok(f64::INFINITY);
         }
         let Level {
@@ -600,8 +601,6 @@ impl<'a> Servo<'a> {
             }
         };
         let valid_count = camera.valid_pixel_count().max(1) as f64;
-        let (lo, hi) = self.bounds;
-        let margin = DVec3::splat(self.config.bounds_margin_m);
         let mut initial_cost = None;
         let mut cost = f64::NAN;
         self.costs.clear();
@@ -745,7 +744,7 @@ impl<'a> Servo<'a> {
                 ));
             }
             let position = pose.translation;
-            if position.cmplt(lo - margin).any() || position.cmpgt(hi + margin).any() {
+            if outside(self.bounds, self.config.bounds_margin_m, position) {
                 return Ok((
                     StopReason::Diverged(Divergence::LeftBounds),
                     lambda,
@@ -762,6 +761,13 @@ impl<'a> Servo<'a> {
         }
         Ok((StopReason::IterationBudget, lambda, cost, budget))
     }
+}
+
+/// Whether `position` lies outside the box `bounds` (lowest, highest corner) enlarged by
+/// `margin_m` on every side.
+fn outside(bounds: (DVec3, DVec3), margin_m: f64, position: DVec3) -> bool {
+    let margin = DVec3::splat(margin_m);
+    position.cmplt(bounds.0 - margin).any() || position.cmpgt(bounds.1 + margin).any()
 }
 
 /// Whether the lowest cost of the last `window` iterations is not at least
