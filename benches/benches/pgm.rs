@@ -124,5 +124,47 @@ fn features(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, features);
+/// Issue #18's goal for the features: G + J_λ + L_G (Convolved) in at most 2 ms at
+/// 320×240 and 6 ms at 640×480 on one core, nearly independent of λ in [1, 40]. One
+/// thread (`parallel: false`), the default filters (recursive from λ = 3), and the
+/// exact truncated kernels at λ = 15 for comparison.
+fn goal_features(c: &mut Criterion) {
+    let city = City::generate(&CityParams::default()).unwrap();
+    let pose = camera_looking_down(DVec3::new(-20.0, 0.8, 3.0), 0.05).inverse();
+    let mut group = c.benchmark_group("goal_features_le_2ms_320_le_6ms_640");
+    group.sample_size(20);
+    for (name, bound_ms) in [("omni-320x240.toml", 2), ("omni-640x480.toml", 6)] {
+        let camera = fixture_camera(name);
+        let w = camera.width();
+        let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        renderer.render(&city.cloud, &pose, &mut frame).unwrap();
+        group.throughput(Throughput::Elements(camera.pixel_count() as u64));
+        let one_thread = PgmOptions {
+            parallel: false,
+            ..PgmOptions::default()
+        };
+        let mut pgm = Pgm::new(&camera, one_thread).unwrap();
+        for lambda in [1.0f32, 3.0, 5.0, 15.0, 40.0] {
+            group.bench_function(
+                format!("g_jlambda_lg_convolved/{w}/lambda{lambda}/bound_{bound_ms}ms"),
+                |b| b.iter(|| pgm.compute(&frame, lambda, PgmJacobian::Convolved).unwrap()),
+            );
+        }
+        let mut exact = Pgm::new(
+            &camera,
+            PgmOptions {
+                recursive_from_lambda: None,
+                ..one_thread
+            },
+        )
+        .unwrap();
+        group.bench_function(format!("exact_kernels/{w}/lambda15"), |b| {
+            b.iter(|| exact.compute(&frame, 15.0, PgmJacobian::Convolved).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, features, goal_features);
 criterion_main!(benches);

@@ -3,6 +3,7 @@
 
 pub mod convolve;
 mod error;
+pub mod recursive;
 mod transform;
 
 pub use error::PgmError;

@@ -7,6 +7,7 @@ use ucm::Camera;
 
 use crate::PgmError;
 use crate::convolve::{self, Kernels, Span};
+use crate::recursive::{self, Mode, Recursive, Scratch, Shape};
 
 /// Supported Gaussian extents, pixels.
 pub const LAMBDA_RANGE: std::ops::RangeInclusive<f32> = 0.5..=40.0;
@@ -49,7 +50,15 @@ pub struct PgmOptions {
     pub normalize: bool,
     /// Spread the convolutions over rayon's threads (the result is the same either
     /// way; turn it off when the caller already keeps every thread busy). Default true.
+    /// The recursive passes run on one thread.
     pub parallel: bool,
+    /// From this λ (pixels) up, correlate with recursive filters
+    /// ([`crate::recursive`]: a cost per pixel independent of λ, no truncation, kernels
+    /// within 2.2e-4 of their peak of the exact ones for λ ≤ 40) instead of the kernels
+    /// truncated at `kernel_radius_lambdas` · λ; `None`: always the truncated kernels.
+    /// Default `Some(3.0)`: below it the truncated kernels (at most 25 taps) are as
+    /// cheap, and step 2 of the paper's rules (λ ≈ 1) is computed exactly as before.
+    pub recursive_from_lambda: Option<f32>,
 }
 
 impl Default for PgmOptions {
@@ -59,6 +68,7 @@ impl Default for PgmOptions {
             stride: 1,
             normalize: false,
             parallel: true,
+            recursive_from_lambda: Some(3.0),
         }
     }
 }
@@ -80,6 +90,13 @@ pub struct Pgm {
     edge_distance_px: Vec<f32>,
     // Full-image planes.
     kernels: Kernels,
+    filters: Option<Filters>,
+    scratch: Scratch,
+    /// Per sample, its index in the transposed plane (`x · height + y`).
+    transposed: Vec<u32>,
+    /// Interleaved six-channel planes of the recursive `L_G` (allocated on first use).
+    lanes: Vec<[f32; 6]>,
+    lanes_t: Vec<[f32; 6]>,
     h_g: Vec<f32>,
     h_k2g: Vec<f32>,
     h_dg: Vec<f32>,
@@ -91,6 +108,8 @@ pub struct Pgm {
     j_lambda: Vec<f32>,
     interaction: Vec<[f32; 6]>,
     weights: Vec<f32>,
+    /// ∇G at the samples (eq. 5).
+    gradient: Vec<[f32; 2]>,
 }
 
 impl Pgm {
@@ -100,6 +119,14 @@ impl Pgm {
             return Err(PgmError::Option {
                 name: "kernel_radius_lambdas",
                 message: format!("must be >= 1, got {}", options.kernel_radius_lambdas),
+            });
+        }
+        if let Some(l) = options.recursive_from_lambda
+            && !(l > 0.0 && l.is_finite())
+        {
+            return Err(PgmError::Option {
+                name: "recursive_from_lambda",
+                message: format!("must be > 0 and finite, got {l}"),
             });
         }
         if options.stride == 0 {
@@ -138,6 +165,10 @@ impl Pgm {
         let edge_distance_px = edge_distance(valid, width, height);
         let n = width * height;
         let m = samples.len();
+        let transposed = samples
+            .iter()
+            .map(|&k| ((k as usize % width) * height + k as usize / width) as u32)
+            .collect();
         Ok(Self {
             brightness,
             options,
@@ -148,6 +179,11 @@ impl Pgm {
             row_spans,
             edge_distance_px,
             kernels: Kernels::default(),
+            filters: None,
+            scratch: Scratch::default(),
+            transposed,
+            lanes: Vec::new(),
+            lanes_t: Vec::new(),
             h_g: vec![0.0; n],
             h_k2g: vec![0.0; n],
             h_dg: vec![0.0; n],
@@ -158,6 +194,7 @@ impl Pgm {
             j_lambda: vec![0.0; m],
             interaction: vec![[0.0; 6]; m],
             weights: vec![1.0; m],
+            gradient: vec![[0.0; 2]; m],
         })
     }
 
@@ -178,10 +215,28 @@ impl Pgm {
         k
     }
 
+    /// The recursive filters of `lambda` if the options ask for them at this λ.
+    fn filters(&mut self, lambda: f32) -> Option<Filters> {
+        let from = self.options.recursive_from_lambda?;
+        if lambda < from {
+            return None;
+        }
+        let filters = match self.filters {
+            Some(f) if f.lambda == lambda => f,
+            _ => Filters::new(lambda),
+        };
+        self.filters = Some(filters);
+        Some(filters)
+    }
+
     /// `G(I, λ)` at the samples only (for the desired image).
     pub fn transform(&mut self, frame: &Frame, lambda: f32) -> Result<&[f32], PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute(frame)?;
+        if let Some(f) = self.filters(lambda) {
+            self.recursive_g_j(&f, false);
+            return Ok(&self.values);
+        }
         let k = self.kernels(lambda);
         let w = self.width;
         let par = self.options.parallel;
@@ -218,6 +273,17 @@ impl Pgm {
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute(frame)?;
+        if let Some(f) = self.filters(lambda) {
+            self.recursive_g_j(&f, true);
+            match jacobian {
+                PgmJacobian::Convolved => self.recursive_convolved(&f),
+                PgmJacobian::Paper { edge_margin } => {
+                    self.recursive_gradient(&f);
+                    self.paper_interaction(lambda, edge_margin);
+                }
+            }
+            return Ok(());
+        }
         let k = self.kernels(lambda);
         let (w, h) = (self.width, self.height);
         let par = self.options.parallel;
@@ -289,6 +355,7 @@ impl Pgm {
             }
             PgmJacobian::Paper { edge_margin } => {
                 // ∇G at the samples: ∂G/∂u = (dg rows, g cols), ∂G/∂v = (g rows, dg cols).
+                let image = self.brightness.image();
                 convolve::rows(image, &mut self.h_dg, w, &k.dg, &self.row_spans, par);
                 convolve::columns(
                     &self.h_dg,
@@ -308,25 +375,106 @@ impl Pgm {
                     &self.sample_spans,
                     par,
                 );
-                let factors = self.brightness.grid().factors();
-                let inverse_range = self.brightness.inverse_range();
-                for ((l, &s), wgt) in self
-                    .interaction
-                    .iter_mut()
-                    .zip(&self.samples)
-                    .zip(&mut self.weights)
-                {
-                    let s = s as usize;
-                    *l = factors[s].photometric([self.out[s], self.out2[s]], inverse_range[s]);
-                    *wgt = match edge_margin {
-                        Some(m) if self.edge_distance_px[s] < m * lambda => 0.0,
-                        _ => 1.0,
-                    };
+                for (g, &s) in self.gradient.iter_mut().zip(&self.samples) {
+                    *g = [self.out[s as usize], self.out2[s as usize]];
                 }
+                self.paper_interaction(lambda, edge_margin);
             }
         }
         self.kernels = k;
         Ok(())
+    }
+
+    /// Eq. (5) at the samples from `self.gradient` (∇G at each sample).
+    fn paper_interaction(&mut self, lambda: f32, edge_margin: Option<f32>) {
+        let factors = self.brightness.grid().factors();
+        let inverse_range = self.brightness.inverse_range();
+        for (((l, &s), wgt), &g) in self
+            .interaction
+            .iter_mut()
+            .zip(&self.samples)
+            .zip(&mut self.weights)
+            .zip(&self.gradient)
+        {
+            let s = s as usize;
+            *l = factors[s].photometric(g, inverse_range[s]);
+            *wgt = match edge_margin {
+                Some(m) if self.edge_distance_px[s] < m * lambda => 0.0,
+                _ => 1.0,
+            };
+        }
+    }
+
+    /// Recursive path: `G` (and `J_λ` if `with_j`) at the samples. Columns first
+    /// (`h_g = g_cols ⊛ I`, `h_k2g = (k² g)_cols ⊛ I`), then the planes are transposed
+    /// (into `out`, `out2`) so that the row pass is a column pass too; samples are read
+    /// at their transposed index.
+    fn recursive_g_j(&mut self, f: &Filters, with_j: bool) {
+        let (w, h) = (self.width, self.height);
+        let image = self.brightness.image();
+        let sc = &mut self.scratch;
+        recursive::columns(image, &mut self.h_g, w, h, &f.g, Mode::Write, sc);
+        recursive::transpose(&self.h_g, &mut self.out, w, h);
+        // G = g_rows ⊛ h_g, computed down the columns of the transposed plane.
+        recursive::columns(&self.out, &mut self.plane, h, w, &f.g, Mode::Write, sc);
+        for (v, &t) in self.values.iter_mut().zip(&self.transposed) {
+            *v = self.plane[t as usize];
+        }
+        if !with_j {
+            return;
+        }
+        // J_λ λ³ = (k² g)_rows ⊛ h_g + g_rows ⊛ h_k2g.
+        recursive::columns(image, &mut self.h_k2g, w, h, &f.k2g, Mode::Write, sc);
+        recursive::transpose(&self.h_k2g, &mut self.out2, w, h);
+        recursive::columns(&self.out, &mut self.plane, h, w, &f.k2g, Mode::Write, sc);
+        recursive::columns(&self.out2, &mut self.plane, h, w, &f.g, Mode::Add, sc);
+        let inv_l3 = 1.0 / (f.lambda * f.lambda * f.lambda);
+        for (j, &t) in self.j_lambda.iter_mut().zip(&self.transposed) {
+            *j = self.plane[t as usize] * inv_l3;
+        }
+    }
+
+    /// Recursive path of [`PgmJacobian::Convolved`]: the six channels of `L_I`
+    /// filtered together (interleaved), columns then rows.
+    fn recursive_convolved(&mut self, f: &Filters) {
+        let (w, h) = (self.width, self.height);
+        let n = w * h;
+        self.lanes.resize(n, [0.0; 6]);
+        self.lanes_t.resize(n, [0.0; 6]);
+        let sc = &mut self.scratch;
+        let li = self.brightness.pixel_interaction().as_flattened();
+        recursive::columns(
+            li,
+            self.lanes.as_flattened_mut(),
+            6 * w,
+            h,
+            &f.g,
+            Mode::Write,
+            sc,
+        );
+        recursive::transpose(&self.lanes, &mut self.lanes_t, w, h);
+        let (src, dst) = (self.lanes_t.as_flattened(), self.lanes.as_flattened_mut());
+        recursive::columns(src, dst, 6 * h, w, &f.g, Mode::Write, sc);
+        for (l, &t) in self.interaction.iter_mut().zip(&self.transposed) {
+            *l = self.lanes[t as usize];
+        }
+        self.weights.fill(1.0);
+    }
+
+    /// Recursive path of ∇G at the samples into `self.gradient` (after
+    /// [`Pgm::recursive_g_j`], whose transposed `h_g` is in `out`):
+    /// `∂G/∂u = dg_rows ⊛ h_g`, `∂G/∂v = g_rows ⊛ (dg_cols ⊛ I)`.
+    fn recursive_gradient(&mut self, f: &Filters) {
+        let (w, h) = (self.width, self.height);
+        let sc = &mut self.scratch;
+        recursive::columns(&self.out, &mut self.plane, h, w, &f.dg, Mode::Write, sc);
+        let image = self.brightness.image();
+        recursive::columns(image, &mut self.h_dg, w, h, &f.dg, Mode::Write, sc);
+        recursive::transpose(&self.h_dg, &mut self.out2, w, h);
+        recursive::columns(&self.out2, &mut self.h_k2g, h, w, &f.g, Mode::Write, sc);
+        for (g, &t) in self.gradient.iter_mut().zip(&self.transposed) {
+            *g = [self.plane[t as usize], self.h_k2g[t as usize]];
+        }
     }
 
     /// Row-major pixel indices of the samples.
@@ -370,6 +518,26 @@ impl Pgm {
     /// The options.
     pub fn options(&self) -> &PgmOptions {
         &self.options
+    }
+}
+
+/// The recursive filters of the three kernels at one λ.
+#[derive(Clone, Copy, Debug)]
+struct Filters {
+    lambda: f32,
+    g: Recursive,
+    k2g: Recursive,
+    dg: Recursive,
+}
+
+impl Filters {
+    fn new(lambda: f32) -> Self {
+        Self {
+            lambda,
+            g: Recursive::new(Shape::Gaussian, lambda),
+            k2g: Recursive::new(Shape::SquaredOffset, lambda),
+            dg: Recursive::new(Shape::Derivative, lambda),
+        }
     }
 }
 

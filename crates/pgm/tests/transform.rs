@@ -59,25 +59,39 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
     /// G and J_λ against eq. (1) and its derivative, on random images and masks, for
-    /// λ from 0.5 to 40 (kernel radius wide enough to cover the whole image).
+    /// λ from 0.5 to 40: the truncated kernels (radius wide enough to cover the whole
+    /// image) within 1e-5 (G) and 1e-4 (J_λ) of the image's sum, the recursive
+    /// filters within their documented bounds (2D kernels within 2.5e-5 of the peak of
+    /// `g`; `k² g` within 2.2e-4 of its peak 2λ²/e).
     #[test]
     fn transform_matches_brute_force(
         image in prop::collection::vec(0.0f32..1.0, 24 * 18),
         mask in prop::collection::vec(prop::bool::weighted(0.8), 24 * 18),
         lambda in prop_oneof![0.5f32..2.0, 2.0f32..10.0, 10.0f32..40.0],
+        recursive in any::<bool>(),
     ) {
         prop_assume!(mask.iter().filter(|&&m| m).count() > 10);
         let camera = small_camera(mask);
         let frame = frame_of(&camera, &image);
         let radius = (30.0 / lambda).max(4.0);
-        let mut pgm = Pgm::new(&camera, PgmOptions { kernel_radius_lambdas: radius, ..PgmOptions::default() }).unwrap();
+        let options = PgmOptions {
+            kernel_radius_lambdas: radius,
+            recursive_from_lambda: recursive.then_some(0.5),
+            ..PgmOptions::default()
+        };
+        let mut pgm = Pgm::new(&camera, options).unwrap();
         pgm.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
         let masked: Vec<f32> = image.iter().zip(camera.valid_pixels()).map(|(&v, &ok)| if ok { v } else { 0.0 }).collect();
         let scale = masked.iter().sum::<f32>() as f64 + 1e-3;
+        let (g_bound, j_bound) = if recursive {
+            (3e-5, 1e-5 + 2.0 * 2.2e-4 * 0.74 / f64::from(lambda))
+        } else {
+            (1e-5, 1e-4)
+        };
         for (s, &k) in pgm.samples().iter().enumerate() {
             let (g, j) = brute_force(&camera, &image, f64::from(lambda), k as usize);
-            prop_assert!((f64::from(pgm.values()[s]) - g).abs() < 1e-5 * scale, "G at {k}: {} vs {g}", pgm.values()[s]);
-            prop_assert!((f64::from(pgm.j_lambda()[s]) - j).abs() < 1e-4 * scale, "J at {k}: {} vs {j}", pgm.j_lambda()[s]);
+            prop_assert!((f64::from(pgm.values()[s]) - g).abs() < g_bound * scale, "G at {k}: {} vs {g}", pgm.values()[s]);
+            prop_assert!((f64::from(pgm.j_lambda()[s]) - j).abs() < j_bound * scale, "J at {k}: {} vs {j}", pgm.j_lambda()[s]);
         }
     }
 }
@@ -139,6 +153,60 @@ fn stride_subsamples_the_full_grid() {
     }
 }
 
+/// On a rendered street view at λ = 3, 15 and 40, every output of the recursive
+/// filters (G, J_λ, both L_G) against the exact correlation (kernels truncated at 8λ,
+/// where the tail is below f32 precision): the largest difference within 5e-5 of the
+/// output's largest magnitude up to λ = 15, 2.5e-4 at λ = 40.
+#[test]
+fn recursive_filters_match_the_exact_correlation() {
+    let camera =
+        Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
+    let frame = crate::common::render(&camera, &crate::common::street_pose());
+    let exact_options = PgmOptions {
+        kernel_radius_lambdas: 8.0,
+        recursive_from_lambda: None,
+        ..PgmOptions::default()
+    };
+    let mut exact = Pgm::new(&camera, exact_options).unwrap();
+    let mut fast = Pgm::new(&camera, PgmOptions::default()).unwrap();
+    let relative = |a: &[f32], b: &[f32]| {
+        let peak = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let diff = a
+            .iter()
+            .zip(b)
+            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+        diff / peak
+    };
+    let column = |rows: &[[f32; 6]], c: usize| rows.iter().map(|r| r[c]).collect::<Vec<_>>();
+    for lambda in [3.0f32, 15.0, 40.0] {
+        for jacobian in [
+            PgmJacobian::Convolved,
+            PgmJacobian::Paper { edge_margin: None },
+        ] {
+            exact.compute(&frame, lambda, jacobian).unwrap();
+            fast.compute(&frame, lambda, jacobian).unwrap();
+            let mut worst = [
+                relative(fast.values(), exact.values()),
+                relative(fast.j_lambda(), exact.j_lambda()),
+                0.0,
+            ];
+            for c in 0..6 {
+                let e = relative(
+                    &column(fast.interaction(), c),
+                    &column(exact.interaction(), c),
+                );
+                worst[2] = worst[2].max(e);
+            }
+            // Measured: ≤ 3.5e-5 at λ = 3 and 15, ≤ 1.8e-4 at λ = 40 (eq. 5's L_G).
+            let bound = if lambda <= 15.0 { 5e-5 } else { 2.5e-4 };
+            assert!(
+                worst.iter().all(|&e| e < bound),
+                "λ {lambda}, {jacobian:?}: G, J_λ, L_G off by {worst:?} of their peaks"
+            );
+        }
+    }
+}
+
 #[test]
 fn bad_lambda_and_options_are_errors() {
     let camera = small_camera(vec![true; 24 * 18]);
@@ -149,6 +217,18 @@ fn bad_lambda_and_options_are_errors() {
             pgm.compute(&frame, bad, PgmJacobian::Convolved),
             Err(PgmError::Lambda(_))
         ));
+    }
+    for bad in [0.0f32, -1.0, f32::NAN, f32::INFINITY] {
+        assert!(
+            Pgm::new(
+                &camera,
+                PgmOptions {
+                    recursive_from_lambda: Some(bad),
+                    ..PgmOptions::default()
+                }
+            )
+            .is_err()
+        );
     }
     assert!(
         Pgm::new(

@@ -142,6 +142,11 @@ pub struct VvsConfig {
     pub normalize: bool,
     /// PGM sample stride (1: every pixel).
     pub pgm_stride: u32,
+    /// From this λ (pixels) up, the PGM's correlations use recursive filters (cost
+    /// independent of λ, within 2.2e-4 of the exact kernels; see
+    /// [`pgm::PgmOptions::recursive_from_lambda`]); below it, and always if it is
+    /// infinite (`inf` in TOML), the exact kernels truncated at 4λ. Default 3.
+    pub pgm_recursive_from_lambda: f32,
     /// Renderer level of detail (pixels between drawn points), `None` for every point.
     pub lod_spacing_px: Option<f32>,
     /// Beyond the paper: the settings of [`Method::Global`].
@@ -177,6 +182,7 @@ impl Default for VvsConfig {
             lambda_schedule: Vec::new(),
             normalize: false,
             pgm_stride: 1,
+            pgm_recursive_from_lambda: 3.0,
             lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
             global: crate::GlobalConfig::default(),
             keep_history: true,
@@ -186,6 +192,12 @@ impl Default for VvsConfig {
 }
 
 impl VvsConfig {
+    /// [`VvsConfig::pgm_recursive_from_lambda`] as the PGM's option.
+    pub(crate) fn pgm_recursive(&self) -> Option<f32> {
+        let from = self.pgm_recursive_from_lambda;
+        from.is_finite().then_some(from)
+    }
+
     /// Check every field against its documented range.
     pub fn validate(&self) -> Result<(), VvsError> {
         let bad = |name: &'static str, message: String| Err(VvsError::Config { name, message });
@@ -273,6 +285,12 @@ impl VvsConfig {
         self.global.validate()?;
         if self.pgm_stride == 0 {
             return bad("pgm_stride", "must be >= 1".into());
+        }
+        if !(self.pgm_recursive_from_lambda > 0.0) {
+            return bad(
+                "pgm_recursive_from_lambda",
+                format!("must be > 0, got {}", self.pgm_recursive_from_lambda),
+            );
         }
         Ok(())
     }

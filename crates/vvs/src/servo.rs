@@ -63,6 +63,7 @@ impl Level {
                     stride: config.pgm_stride,
                     normalize: config.normalize,
                     parallel: config.parallel,
+                    recursive_from_lambda: config.pgm_recursive(),
                     ..PgmOptions::default()
                 },
             )?,

@@ -11,6 +11,7 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         pyramid_levels: 3,
         lambda_schedule: vec![7.5, 3.0],
         stall_window: 0,
+        pgm_recursive_from_lambda: f32::INFINITY,
         ..VvsConfig::default()
     };
     let text = config.to_toml_string().unwrap();
@@ -19,11 +20,16 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
     let partial = VvsConfig::from_toml_str("gain = 0.3\n").unwrap();
     assert_eq!(partial.gain, 0.3);
     assert_eq!(partial.max_iterations, 250);
+    assert_eq!(partial.pgm_recursive_from_lambda, 3.0);
+    let exact = VvsConfig::from_toml_str("pgm_recursive_from_lambda = inf\n").unwrap();
+    assert_eq!(exact.pgm_recursive_from_lambda, f32::INFINITY);
     for (text, field) in [
         ("gain = 2.0", "gain"),
         ("lambda_star_step1 = 100.0", "lambda_star_step1"),
         ("step1_max_iterations = 300", "step1_max_iterations"),
         ("pgm_stride = 0", "pgm_stride"),
+        ("pgm_recursive_from_lambda = 0.0", "pgm_recursive_from_lambda"),
+        ("pgm_recursive_from_lambda = nan", "pgm_recursive_from_lambda"),
         ("pyramid_levels = 0", "pyramid_levels"),
         ("pyramid_levels = 6", "pyramid_levels"),
         (
