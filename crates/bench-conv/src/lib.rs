@@ -57,7 +57,33 @@ pub fn resolve(base_dir: &Path, path: &Path) -> PathBuf {
     }
 }
 
-/// Parse `n` comma-separated numbers.
+/// Parse `N` comma-separated pixel counts (`x,y,width,height`…): non-negative integers
+/// that fit in `u32`, nothing else (`-10`, `1e10`, `nan`, `2.5` are errors).
+pub fn parse_pixels<const N: usize>(text: &str) -> anyhow::Result<[u32; N]> {
+    let values: Vec<u32> = text
+        .split(',')
+        .map(|s| {
+            s.trim().parse::<u32>().with_context(|| {
+                format!(
+                    "`{}` is not a pixel count (an integer from 0 to {})",
+                    s.trim(),
+                    u32::MAX
+                )
+            })
+        })
+        .collect::<anyhow::Result<_>>()?;
+    if values.len() != N {
+        bail!(
+            "expected {N} comma-separated integers, got {}",
+            values.len()
+        );
+    }
+    let mut out = [0; N];
+    out.copy_from_slice(&values);
+    Ok(out)
+}
+
+/// Parse `N` comma-separated numbers.
 pub fn parse_numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {
     let values: Vec<f64> = text
         .split(',')
@@ -82,6 +108,10 @@ pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Res
         (Some(p), None) => Ok(Isometry3::from_pose_vector(parse_numbers::<6>(p)?)?),
         (None, Some(l)) => {
             let [x, y, z, heading] = parse_numbers::<4>(l)?;
+            anyhow::ensure!(
+                [x, y, z, heading].iter().all(|v| v.is_finite()),
+                "--looking-down {l}: every value must be finite"
+            );
             Ok(splat::city::camera_looking_down(
                 DVec3::new(x, y, z),
                 heading.to_radians(),

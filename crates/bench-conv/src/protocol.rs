@@ -334,14 +334,25 @@ impl Protocol {
         if self.methods.iter().any(|m| *m != Method::Povs) && self.jacobians.is_empty() {
             bail!("PGM methods need at least one Jacobian in `jacobians`");
         }
-        if !(self.success_threshold_m > 0.0) {
-            bail!("success_threshold_m must be > 0");
+        if !(self.success_threshold_m > 0.0 && self.success_threshold_m.is_finite()) {
+            bail!(
+                "success_threshold_m must be finite and > 0, got {}",
+                self.success_threshold_m
+            );
         }
         let count = self.offsets.sampling.count();
-        if let Some(indices) = &self.initial_indices
-            && let Some(bad) = indices.iter().find(|&&i| i >= count)
-        {
-            bail!("initial index {bad} is not in 0..{count}");
+        if let Some(indices) = &self.initial_indices {
+            if let Some(bad) = indices.iter().find(|&&i| i >= count) {
+                bail!("initial index {bad} is not in 0..{count}");
+            }
+            if indices.is_empty() {
+                bail!("initial_indices is empty: the protocol would run nothing");
+            }
+            let mut sorted = indices.clone();
+            sorted.sort_unstable();
+            if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+                bail!("initial_indices lists {} twice", w[0]);
+            }
         }
         if self.offsets.scales.is_empty() {
             bail!("[offsets] scales is empty");
@@ -366,7 +377,16 @@ impl Protocol {
             self.desired_pose(k)
                 .with_context(|| format!("desired pose {k}: {d:?}"))?;
         }
-        self.method_configs(true)?;
+        let configs = self.method_configs(true)?;
+        let mut names: Vec<&str> = configs.iter().map(|c| c.name.as_str()).collect();
+        names.sort_unstable();
+        if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+            bail!(
+                "two method configurations are named `{}` (a variant's name must differ from \
+                 every other, and from the methods' own names such as `povs` or `rule2/convolved`)",
+                w[0]
+            );
+        }
         Ok(())
     }
 
@@ -379,6 +399,9 @@ impl Protocol {
     pub fn desired_pose(&self, k: usize) -> anyhow::Result<Isometry3> {
         let d = &self.desired[k];
         match (d.looking_down, d.pose) {
+            (Some(l), None) if !l.iter().all(|v| v.is_finite()) => {
+                bail!("looking_down {l:?} is not finite")
+            }
             (Some([x, y, z, heading]), None) => Ok(splat::city::camera_looking_down(
                 glam::DVec3::new(x, y, z),
                 heading.to_radians(),

@@ -16,7 +16,8 @@ pub fn load_grey_frame(image: &Path, crop: [u32; 4], camera: &Camera) -> anyhow:
         .into_luma8();
     let [x, y, w, h] = crop;
     ensure!(
-        x + w <= picture.width() && y + h <= picture.height(),
+        u64::from(x) + u64::from(w) <= u64::from(picture.width())
+            && u64::from(y) + u64::from(h) <= u64::from(picture.height()),
         "crop {crop:?} exceeds the {}x{} image",
         picture.width(),
         picture.height()

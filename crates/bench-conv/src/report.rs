@@ -43,80 +43,184 @@ pub struct RunRecord {
     pub success: bool,
 }
 
-const HEADER: &str = "run_id,scene,desired,offset_scale,initial,method,final_position_error_m,final_rotation_error_deg,iterations_step1,iterations_step2,stop,lambda,cost,wall_time_s,success";
+const HEADER: [&str; 15] = [
+    "run_id",
+    "scene",
+    "desired",
+    "offset_scale",
+    "initial",
+    "method",
+    "final_position_error_m",
+    "final_rotation_error_deg",
+    "iterations_step1",
+    "iterations_step2",
+    "stop",
+    "lambda",
+    "cost",
+    "wall_time_s",
+    "success",
+];
 
-/// Write records as CSV.
-pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
-    let mut text = String::from(HEADER);
-    text.push('\n');
-    for r in records {
-        writeln!(
-            text,
-            "{},{},{},{},{},{},{:.6e},{:.6e},{},{},{},{},{:.6e},{:.3},{}",
-            r.run_id,
-            r.scene,
-            r.desired,
-            r.offset_scale,
-            r.initial,
-            r.method,
-            r.final_position_error_m,
-            r.final_rotation_error_deg,
-            r.iterations_step1,
-            r.iterations_step2,
-            r.stop,
-            r.lambda,
-            r.cost,
-            r.wall_time_s,
-            r.success
-        )?;
+/// The file that marks a results folder whose writing has not finished.
+pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
+
+/// Prepare the results folder `out` before any work, so that a bad `--out` fails at
+/// once and an interrupted run never leaves a folder that looks complete: the folder
+/// is created (an existing file there is an error), a stale `summary.md` is removed,
+/// and [`INCOMPLETE_MARKER`] is written until [`finish_results`].
+pub fn begin_results(out: &Path) -> anyhow::Result<()> {
+    if out.exists() && !out.is_dir() {
+        bail!("{} exists and is not a folder", out.display());
     }
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let summary = out.join("summary.md");
+    if summary.exists() {
+        std::fs::remove_file(&summary)
+            .with_context(|| format!("removing the stale {}", summary.display()))?;
+    }
+    write_atomically(
+        &out.join(INCOMPLETE_MARKER),
+        b"These results are being written, or their writing was interrupted: do not use them.\n",
+    )
 }
 
-/// Read a CSV written by [`write_csv`].
+/// Mark the results folder `out` complete (every file written).
+pub fn finish_results(out: &Path) -> anyhow::Result<()> {
+    let marker = out.join(INCOMPLETE_MARKER);
+    std::fs::remove_file(&marker).with_context(|| format!("removing {}", marker.display()))
+}
+
+/// Write `bytes` to `path` through a temporary file in the same folder and a rename,
+/// so that `path` is never left half-written.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} is not a file path", path.display()))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(".tmp");
+    let tmp = path.with_file_name(tmp_name);
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+}
+
+/// Write records as CSV (RFC 4180 quoting through the `csv` crate, so that names with
+/// commas or quotes survive; numbers in the formats below, so that two runs compare
+/// as text), atomically.
+pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    writer.write_record(HEADER)?;
+    for r in records {
+        writer.write_record([
+            r.run_id.to_string(),
+            r.scene.clone(),
+            r.desired.to_string(),
+            r.offset_scale.to_string(),
+            r.initial.to_string(),
+            r.method.clone(),
+            format!("{:.6e}", r.final_position_error_m),
+            format!("{:.6e}", r.final_rotation_error_deg),
+            r.iterations_step1.to_string(),
+            r.iterations_step2.to_string(),
+            r.stop.clone(),
+            r.lambda.to_string(),
+            format!("{:.6e}", r.cost),
+            format!("{:.3}", r.wall_time_s),
+            r.success.to_string(),
+        ])?;
+    }
+    let bytes = writer.into_inner().context("encoding the runs CSV")?;
+    write_atomically(path, &bytes)
+}
+
+/// Read a CSV written by [`write_csv`]. Errors name the file, line and field; errors
+/// that are NaN, infinite or negative, and an offset scale that is not positive, are
+/// refused (no statistic is computed from them).
 pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut lines = text.lines();
-    if lines.next() != Some(HEADER) {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .from_path(path)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let header = reader
+        .headers()
+        .with_context(|| format!("reading {}", path.display()))?
+        .clone();
+    if header.iter().ne(HEADER) {
         bail!(
             "{}: not a bench-conv runs CSV (unexpected header)",
             path.display()
         );
     }
-    lines
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(n, line)| {
-            let f: Vec<&str> = line.split(',').collect();
-            if f.len() != 15 {
-                bail!(
-                    "{}:{}: {} fields, expected 15",
-                    path.display(),
-                    n + 2,
-                    f.len()
-                );
+    let mut records = Vec::new();
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let f = row.with_context(|| format!("{}:{line}", path.display()))?;
+        if f.len() != HEADER.len() {
+            bail!(
+                "{}:{line}: {} fields, expected {}",
+                path.display(),
+                f.len(),
+                HEADER.len()
+            );
+        }
+        let field = |i: usize| &f[i];
+        let ctx = |i: usize| format!("{}:{line}: field {}", path.display(), HEADER[i]);
+        macro_rules! parse {
+            ($i:expr) => {
+                field($i)
+                    .parse()
+                    .with_context(|| format!("{}: `{}`", ctx($i), field($i)))?
+            };
+        }
+        let record = RunRecord {
+            run_id: parse!(0),
+            scene: field(1).to_string(),
+            desired: parse!(2),
+            offset_scale: parse!(3),
+            initial: parse!(4),
+            method: field(5).to_string(),
+            final_position_error_m: parse!(6),
+            final_rotation_error_deg: parse!(7),
+            iterations_step1: parse!(8),
+            iterations_step2: parse!(9),
+            stop: field(10).to_string(),
+            lambda: parse!(11),
+            cost: parse!(12),
+            wall_time_s: parse!(13),
+            success: parse!(14),
+        };
+        for (i, value) in [
+            (6, record.final_position_error_m),
+            (7, record.final_rotation_error_deg),
+            (13, record.wall_time_s),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                bail!("{}: {value} is not a finite, non-negative number", ctx(i));
             }
-            let ctx = || format!("{}:{}", path.display(), n + 2);
-            Ok(RunRecord {
-                run_id: f[0].parse().with_context(ctx)?,
-                scene: f[1].to_string(),
-                desired: f[2].parse().with_context(ctx)?,
-                offset_scale: f[3].parse().with_context(ctx)?,
-                initial: f[4].parse().with_context(ctx)?,
-                method: f[5].to_string(),
-                final_position_error_m: f[6].parse().with_context(ctx)?,
-                final_rotation_error_deg: f[7].parse().with_context(ctx)?,
-                iterations_step1: f[8].parse().with_context(ctx)?,
-                iterations_step2: f[9].parse().with_context(ctx)?,
-                stop: f[10].to_string(),
-                lambda: f[11].parse().with_context(ctx)?,
-                cost: f[12].parse().with_context(ctx)?,
-                wall_time_s: f[13].parse().with_context(ctx)?,
-                success: f[14].parse().with_context(ctx)?,
-            })
-        })
-        .collect()
+        }
+        if !(record.offset_scale.is_finite() && record.offset_scale > 0.0) {
+            bail!(
+                "{}: {} is not a positive scale",
+                ctx(3),
+                record.offset_scale
+            );
+        }
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// Decide every record's success anew from its final position error and
+/// `threshold_m` (finite, > 0), as `merge --threshold-m` does.
+pub fn apply_threshold(records: &mut [RunRecord], threshold_m: f64) -> anyhow::Result<()> {
+    if !(threshold_m > 0.0 && threshold_m.is_finite()) {
+        bail!("the success threshold must be finite and > 0, got {threshold_m}");
+    }
+    for r in records {
+        r.success = r.final_position_error_m < threshold_m;
+    }
+    Ok(())
 }
 
 /// Merge shards: concatenate, sort by run id, refuse duplicates.

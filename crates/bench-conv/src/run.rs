@@ -32,12 +32,11 @@ pub struct Shard {
 impl Shard {
     /// Parse `i/n`.
     pub fn parse(text: &str) -> anyhow::Result<Self> {
-        let (i, n) = text.split_once('/').context("a shard is written i/n")?;
-        let (index, count): (usize, usize) = (i.trim().parse()?, n.trim().parse()?);
-        anyhow::ensure!(
-            count > 0 && index < count,
-            "shard {index}/{count}: need 0 <= i < n"
-        );
+        let usage = || format!("shard `{text}`: write i/n with integers 0 <= i < n");
+        let (i, n) = text.split_once('/').with_context(usage)?;
+        let index: usize = i.trim().parse().with_context(usage)?;
+        let count: usize = n.trim().parse().with_context(usage)?;
+        anyhow::ensure!(count > 0 && index < count, usage());
         Ok(Self { index, count })
     }
 
@@ -62,17 +61,36 @@ pub fn run_protocol(
         .into_iter()
         .filter(|r| shard.is_none_or(|s| s.owns(r.id / methods.len())))
         .collect();
-    // Bounds: every desired and initial pose must be inside the cloud's box.
+    if runs.is_empty() {
+        let poses = protocol.desired.len()
+            * protocol.initial_indices().len()
+            * protocol.offsets.scales.len();
+        anyhow::bail!(
+            "{} has no run: the protocol has {poses} poses (desired × initial × scale)",
+            shard.map_or("the protocol".to_string(), |s| format!(
+                "shard {}/{}",
+                s.index, s.count
+            ))
+        );
+    }
+    // One rule for where a camera may be, the optimiser's own: inside the cloud's
+    // bounding box enlarged by `bounds_margin_m` (a street camera, or a camera a few
+    // metres from an object scan).
     let (lo, hi) = cloud.bounds();
     for r in &runs {
-        for pose in [
-            protocol.desired_pose(r.desired)?,
-            protocol.initial_pose(r.desired, r.initial, protocol.offsets.scales[r.scale])?,
+        let margin = methods[r.method].config.bounds_margin_m;
+        for (what, pose) in [
+            ("desired", protocol.desired_pose(r.desired)?),
+            (
+                "initial",
+                protocol.initial_pose(r.desired, r.initial, protocol.offsets.scales[r.scale])?,
+            ),
         ] {
             let p = pose.translation;
             anyhow::ensure!(
-                p.cmpge(lo).all() && p.cmple(hi).all(),
-                "pose {p} of desired {} / initial {} is outside the cloud's bounds {lo} – {hi}",
+                p.cmpge(lo - margin).all() && p.cmple(hi + margin).all(),
+                "the {what} camera at {p} (desired {}, initial {}) is more than \
+                 bounds_margin_m = {margin} m outside the cloud's bounds {lo} – {hi}",
                 r.desired,
                 r.initial
             );

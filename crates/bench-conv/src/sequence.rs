@@ -36,6 +36,11 @@ use splat::rng::SplitMix64;
 use splat::{Frame, PixelStatus};
 use ucm::{Camera, Isometry3, ValidRegion};
 
+/// Most frames a sequence may have (every frame is rendered and kept).
+pub const MAX_FRAMES: usize = 100_000;
+/// Longest path of a sequence, metres.
+pub const MAX_LENGTH_M: f64 = 100_000.0;
+
 /// The trajectory and its shaking.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -159,7 +164,11 @@ impl Trajectory {
     /// Check every field.
     pub fn validate(&self) -> anyhow::Result<()> {
         let finite = |v: f64| v.is_finite();
-        anyhow::ensure!(self.frames >= 1, "trajectory.frames must be >= 1");
+        anyhow::ensure!(
+            (1..=MAX_FRAMES).contains(&self.frames),
+            "trajectory.frames must be in 1..={MAX_FRAMES}, got {}",
+            self.frames
+        );
         anyhow::ensure!(
             self.fps > 0.0 && finite(self.fps),
             "trajectory.fps must be > 0"
@@ -170,6 +179,11 @@ impl Trajectory {
                 && self.length_m >= 0.0
                 && finite(self.length_m),
             "trajectory.start, heading_deg and length_m must be finite (length >= 0)"
+        );
+        anyhow::ensure!(
+            self.length_m <= MAX_LENGTH_M,
+            "trajectory.length_m must be at most {MAX_LENGTH_M} m, got {}",
+            self.length_m
         );
         anyhow::ensure!(
             self.camera_height_m > 0.0 && finite(self.camera_height_m),
@@ -195,6 +209,12 @@ impl Trajectory {
                 && s.bump_length_m > 0.0
                 && finite(s.bump_length_m),
             "trajectory.shake values must be finite and >= 0 (bump_length_m > 0)"
+        );
+        anyhow::ensure!(
+            s.bumps_per_m * self.length_m <= 1e6,
+            "trajectory: {} bumps per metre over {} m is more than a million bumps",
+            s.bumps_per_m,
+            self.length_m
         );
         Ok(())
     }

@@ -689,7 +689,7 @@ pub fn write_results(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_csv(&out.join("frames.csv"), &results.records)?;
     let summary = summary_markdown(&spec.name, results, spec.lost_threshold_m);
-    std::fs::write(out.join("summary.md"), &summary)?;
+    crate::report::write_atomically(&out.join("summary.md"), summary.as_bytes())?;
     plot(results, out)?;
     let Some(&n) = spec.steps.iter().max() else {
         return Ok(summary);

@@ -203,6 +203,46 @@ fn bad_protocols_are_clear_errors() {
             ),
             "missing.laz",
         ),
+        (
+            good.replace("initial_indices = [0, 5, 63]", "initial_indices = []"),
+            "initial_indices is empty",
+        ),
+        (
+            good.replace(
+                "initial_indices = [0, 5, 63]",
+                "initial_indices = [0, 5, 0]",
+            ),
+            "lists 0 twice",
+        ),
+        (
+            good.replace("name = \"rule2/lm\"", "name = \"povs\""),
+            "named `povs`",
+        ),
+        (
+            good.replace("name = \"rule2/lm\"", "name = \"rule2/convolved\""),
+            "named `rule2/convolved`",
+        ),
+        (
+            good.replace(
+                "name = \"tiny\"",
+                "name = \"tiny\"\nsuccess_threshold_m = inf",
+            ),
+            "finite and > 0",
+        ),
+        (
+            good.replace(
+                "name = \"tiny\"",
+                "name = \"tiny\"\nsuccess_threshold_m = -1.0",
+            ),
+            "finite and > 0",
+        ),
+        (
+            good.replace(
+                "looking_down = [-20.0, 0.5, 3.0, 0.0]",
+                "looking_down = [nan, 0.5, 3.0, 0.0]",
+            ),
+            "is not finite",
+        ),
     ] {
         let path = dir.join("broken.toml");
         std::fs::write(&path, &broken).unwrap();
@@ -227,6 +267,97 @@ fn bad_protocols_are_clear_errors() {
         run_protocol(&protocol, &cloud, &scene, false, None).unwrap_err()
     );
     assert!(message.contains("outside the cloud"), "{message}");
+    assert!(message.contains("bounds_margin_m"), "{message}");
+    // One rule for cameras (the optimiser's): within bounds_margin_m (5 m) of the
+    // cloud's box, as a camera a few metres from an object scan is.
+    let (lo, _) = cloud.bounds();
+    let near = good.replace(
+        "looking_down = [-20.0, 0.5, 3.0, 0.0]",
+        &format!("looking_down = [{}, 0.5, 3.0, 0.0]", lo.x - 3.0),
+    );
+    std::fs::write(&path, near).unwrap();
+    let protocol = Protocol::load(&path).unwrap();
+    run_protocol(&protocol, &cloud, &scene, false, None).unwrap();
+    // A shard with no run is an error, not an empty success.
+    let protocol = Protocol::load(&tiny_protocol(&dir)).unwrap();
+    let message = format!(
+        "{:#}",
+        run_protocol(
+            &protocol,
+            &cloud,
+            &scene,
+            false,
+            Some(Shard { index: 5, count: 8 })
+        )
+        .unwrap_err()
+    );
+    assert!(message.contains("shard 5/8 has no run"), "{message}");
+    for bad in ["1/2/3", "a/2", "2/2", "1", "-1/2"] {
+        let message = format!("{:#}", Shard::parse(bad).unwrap_err());
+        assert!(message.contains("write i/n"), "{bad}: {message}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// CSV fields with commas and quotes survive a round trip; errors that are NaN,
+/// infinite or negative are refused with the file, line and field; a new threshold
+/// decides success anew; a results folder is marked incomplete until it is finished,
+/// and a file in the way of `--out` is an error before any work.
+#[test]
+fn csv_thresholds_and_results_folders_are_safe() {
+    use bench_conv::report::{
+        INCOMPLETE_MARKER, RunRecord, apply_threshold, begin_results, finish_results,
+    };
+    let dir = temp("csv");
+    let record = |id: usize, error: f64| RunRecord {
+        run_id: id,
+        scene: "a,b \"c\".las".into(),
+        desired: 0,
+        offset_scale: 0.5,
+        initial: id,
+        method: "rule2,x".into(),
+        final_position_error_m: error,
+        final_rotation_error_deg: 0.1,
+        iterations_step1: 3,
+        iterations_step2: 4,
+        stop: "stalled".into(),
+        lambda: 1.0,
+        cost: f64::NAN,
+        wall_time_s: 0.25,
+        success: error < 0.02,
+    };
+    let records = vec![record(0, 0.01), record(1, 0.5)];
+    let path = dir.join("runs.csv");
+    write_csv(&path, &records).unwrap();
+    let back = read_csv(&path).unwrap();
+    assert_eq!(back.len(), 2);
+    assert_eq!(back[0].scene, records[0].scene);
+    assert_eq!(back[1].method, "rule2,x");
+    let merged = merge(vec![back]).unwrap();
+    assert_eq!(merged.len(), 2);
+    for bad in [f64::NAN, f64::INFINITY, -1.0] {
+        write_csv(&path, &[record(0, bad)]).unwrap();
+        let message = format!("{:#}", read_csv(&path).unwrap_err());
+        assert!(
+            message.contains("final_position_error_m") && message.contains(":2"),
+            "{bad}: {message}"
+        );
+    }
+    let mut rethresholded = records.clone();
+    apply_threshold(&mut rethresholded, 1.0).unwrap();
+    assert!(rethresholded.iter().all(|r| r.success));
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(apply_threshold(&mut rethresholded, bad).is_err());
+    }
+    let out = dir.join("results");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("summary.md"), "stale").unwrap();
+    begin_results(&out).unwrap();
+    assert!(out.join(INCOMPLETE_MARKER).exists() && !out.join("summary.md").exists());
+    finish_results(&out).unwrap();
+    assert!(!out.join(INCOMPLETE_MARKER).exists());
+    let message = format!("{:#}", begin_results(&path).unwrap_err());
+    assert!(message.contains("not a folder"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -372,4 +503,24 @@ fn domain_curve_and_axis_basins_count_the_records() {
     // An axis with no run at a scale ends its basin there (no success from nothing).
     records.retain(|r| !(r.initial / 2 == 1 && r.offset_scale == 1.0));
     assert_eq!(axis_basins(&records)[0].1[1], 0.5);
+}
+
+/// Pixel counts (`--crop`) are non-negative integers that fit in u32, nothing else.
+#[test]
+fn pixel_counts_parse_strictly() {
+    use bench_conv::parse_pixels;
+    assert_eq!(
+        parse_pixels::<4>("310, 80,1230,1000").unwrap(),
+        [310, 80, 1230, 1000]
+    );
+    for bad in [
+        "1e10,80,1230,1000",
+        "-10,80,1230,1000",
+        "nan,80,1230,1000",
+        "2.5,80,1230,1000",
+        "4294967296,0,1,1",
+        "1,2,3",
+    ] {
+        assert!(parse_pixels::<4>(bad).is_err(), "{bad}");
+    }
 }

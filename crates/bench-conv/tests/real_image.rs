@@ -69,3 +69,28 @@ fn pgm_of_the_real_catadioptric_image_smooths_with_lambda() {
     );
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// A crop whose corner overflows `u32` (the `--crop 1e10,…` of the hardening issue,
+/// once parsed) is an error, not a wrapped check and a black image.
+#[test]
+fn crops_beyond_the_image_are_errors() {
+    let dir = std::env::temp_dir().join(format!("bench-conv-crop-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("small.png");
+    image::GrayImage::from_pixel(400, 300, image::Luma([128u8]))
+        .save(&path)
+        .unwrap();
+    let camera =
+        ucm::Camera::load_toml(test_support::workspace_root().join("fixtures/omni-320x240.toml"))
+            .unwrap();
+    assert!(load_grey_frame(&path, [10, 10, 320, 240], &camera).is_ok());
+    for crop in [
+        [u32::MAX - 5, 0, 320, 240],
+        [0, u32::MAX - 100, 320, 240],
+        [81, 0, 320, 240],
+    ] {
+        let message = format!("{:#}", load_grey_frame(&path, crop, &camera).unwrap_err());
+        assert!(message.contains("exceeds"), "{crop:?}: {message}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

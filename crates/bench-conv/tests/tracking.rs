@@ -72,11 +72,22 @@ fn trajectory_has_the_papers_length_the_kerb_and_the_shaking() {
             dr.to_degrees()
         );
     }
-    let bad = Trajectory {
-        fps: 0.0,
-        ..Trajectory::default()
-    };
-    assert!(bad.validate().is_err());
+    for bad in [
+        Trajectory {
+            fps: 0.0,
+            ..Trajectory::default()
+        },
+        Trajectory {
+            frames: 100_000_000_000,
+            ..Trajectory::default()
+        },
+        Trajectory {
+            length_m: 1e12,
+            ..Trajectory::default()
+        },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
 }
 
 #[test]

@@ -46,6 +46,10 @@ pub struct PointCloud {
     cell_size_m: f32,
 }
 
+/// Largest distance (along any axis) of a point from the cloud's origin, metres:
+/// positions are `f32` relative to the origin, whose spacing there is 6 cm.
+pub const MAX_OFFSET_M: f64 = 1e6;
+
 /// Default edge of the culling / level-of-detail cells, metres.
 pub const DEFAULT_CELL_SIZE_M: f32 = 2.0;
 
@@ -56,8 +60,9 @@ impl PointCloud {
     /// `spacing_m` is the typical distance between neighbouring points on a surface
     /// (it sizes the splats); `None` estimates it from the data.
     ///
-    /// Errors: no point, a non-finite coordinate or intensity, attribute lengths that
-    /// differ, more than `u32::MAX` points.
+    /// Errors: no point, a non-finite coordinate or intensity, a point farther than
+    /// [`MAX_OFFSET_M`] from `origin`, attribute lengths that differ, more than
+    /// `u32::MAX` points.
     pub fn from_points(
         origin: DVec3,
         positions: &[DVec3],
@@ -124,6 +129,17 @@ impl PointCloud {
                 return Err(SplatError::NonFinitePoint {
                     index,
                     value: p.to_array(),
+                });
+            }
+            let offset = (*p - origin).abs().max_element();
+            if !(offset <= MAX_OFFSET_M) {
+                return Err(SplatError::Parameter {
+                    name: "positions",
+                    message: format!(
+                        "point {index} at {p} lies {offset:.3e} m from the origin {origin}; \
+                         positions are stored in f32 relative to the origin and must stay \
+                         within {MAX_OFFSET_M:.0e} m of it"
+                    ),
                 });
             }
         }

@@ -14,6 +14,19 @@ pub enum SplatError {
         /// The cause.
         source: Box<las::Error>,
     },
+    /// A LAS/LAZ file that holds fewer points than its header announces.
+    #[error(
+        "LAS/LAZ file {path} is truncated or its header lies: its header announces {announced} points (0: unread), the file holds {found}"
+    )]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// The header's point count.
+        announced: u64,
+        /// What the file holds instead (for LAS, the points its bytes hold; for LAZ,
+        /// the whole chunks decompressed before its data ended).
+        found: String,
+    },
     /// A cloud with no point.
     #[error("the point cloud is empty")]
     EmptyCloud,

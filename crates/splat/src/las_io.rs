@@ -19,6 +19,9 @@ use glam::DVec3;
 
 use crate::{PointCloud, SplatError};
 
+/// Points read from a LAS/LAZ file at a time.
+const LAS_CHUNK_POINTS: u64 = 1 << 20;
+
 /// Intensity of every point of a cloud that has neither colour nor intensity.
 pub const CONSTANT_INTENSITY: f32 = 0.5;
 
@@ -66,6 +69,17 @@ fn las_error(path: &Path) -> impl Fn(las::Error) -> SplatError + '_ {
     }
 }
 
+/// Whether a read failed because the point data ended (a truncated LAS, or a LAZ
+/// whose compressed chunks stop), rather than on corrupt data.
+fn ends_early(error: &las::Error) -> bool {
+    let eof = |e: &std::io::Error| e.kind() == std::io::ErrorKind::UnexpectedEof;
+    match error {
+        las::Error::Io(e) => eof(e),
+        las::Error::LasZipError(laz::LasZipError::IoError(e)) => eof(e),
+        _ => false,
+    }
+}
+
 /// Read a LAS or LAZ file into a cloud (point spacing estimated from the data).
 pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatError> {
     let path = path.as_ref();
@@ -75,7 +89,17 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
             source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
         });
     }
-    let mut reader = las::Reader::from_path(path).map_err(las_error(path))?;
+    let mut reader = las::Reader::from_path(path).map_err(|e| {
+        if ends_early(&e) {
+            SplatError::Truncated {
+                path: path.to_owned(),
+                announced: 0,
+                found: "too few bytes for its header, its point data or its chunk table".into(),
+            }
+        } else {
+            las_error(path)(e)
+        }
+    })?;
     let header = reader.header().clone();
     let format = header.point_format();
     let point_format = format.to_u8().map_err(las_error(path))?;
@@ -85,38 +109,84 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
         DVec3::new(b.min.x, b.min.y, b.min.z),
         DVec3::new(b.max.x, b.max.y, b.max.z),
     );
-    let data = reader.read_all().map_err(las_error(path))?;
-    if (data.len() as u64) < header.number_of_points() {
-        return Err(SplatError::Las {
+    let announced = header.number_of_points();
+    // An uncompressed file cannot hold more points than its bytes after the header;
+    // checked before anything is allocated. A LAZ file is read by chunks, so memory
+    // follows what it really holds, never its header.
+    if !format.is_compressed {
+        let raw = std::fs::File::open(path)
+            .map_err(|source| SplatError::Io {
+                path: path.to_owned(),
+                source,
+            })
+            .and_then(|file| {
+                las::raw::Header::read_from(std::io::BufReader::new(file)).map_err(las_error(path))
+            })?;
+        let file_bytes = std::fs::metadata(path)
+            .map_err(|source| SplatError::Io {
+                path: path.to_owned(),
+                source,
+            })?
+            .len();
+        let record_bytes = u64::from(raw.point_data_record_length).max(1);
+        let room = file_bytes.saturating_sub(u64::from(raw.offset_to_point_data));
+        if announced > room / record_bytes {
+            return Err(SplatError::Truncated {
+                path: path.to_owned(),
+                announced,
+                found: format!("{} (its {room} bytes of points)", room / record_bytes),
+            });
+        }
+    }
+    let mut positions: Vec<DVec3> = Vec::new();
+    let mut raw_rgb: Vec<[u16; 3]> = Vec::new();
+    let mut raw_intensity: Vec<u16> = Vec::new();
+    let has_rgb = format.has_color;
+    let mut chunk = las::PointDataBuilder::new().for_header(&header).build();
+    let mut read = 0u64;
+    while read < announced {
+        let want = (announced - read).min(LAS_CHUNK_POINTS);
+        let got = match reader.fill_points(want, &mut chunk) {
+            Ok(n) => n,
+            Err(e) if ends_early(&e) => 0,
+            Err(e) => return Err(las_error(path)(e)),
+        };
+        if got == 0 {
+            break;
+        }
+        positions.extend(
+            chunk
+                .x()
+                .zip(chunk.y())
+                .zip(chunk.z())
+                .map(|((x, y), z)| DVec3::new(x, y, z)),
+        );
+        match chunk.rgb() {
+            Some(rgb) if has_rgb => raw_rgb.extend(rgb.map(|(r, g, b)| [r, g, b])),
+            _ => raw_intensity.extend(chunk.intensity()),
+        }
+        read += got;
+    }
+    if read < announced {
+        return Err(SplatError::Truncated {
             path: path.to_owned(),
-            source: Box::new(las::Error::Io(std::io::Error::new(
-                std::io::ErrorKind::UnexpectedEof,
-                format!(
-                    "truncated: {} of {} points",
-                    data.len(),
-                    header.number_of_points()
-                ),
-            ))),
+            announced,
+            found: format!("{read} in whole chunks of {LAS_CHUNK_POINTS} before its data ends"),
         });
     }
-    let positions: Vec<DVec3> = data
-        .x()
-        .zip(data.y())
-        .zip(data.z())
-        .map(|((x, y), z)| DVec3::new(x, y, z))
-        .collect();
     if positions.is_empty() {
         return Err(SplatError::EmptyCloud);
     }
-    let origin = if bounds.0.is_finite() {
-        bounds.0.floor()
-    } else {
-        positions[0].floor()
-    };
+    // The origin comes from the data (the header's bounds may lie): the minimum
+    // corner, rounded down to the metre.
+    let origin = positions
+        .iter()
+        .fold(DVec3::splat(f64::INFINITY), |m, p| m.min(*p))
+        .floor();
 
-    let (intensities, colors, max_color_value, intensity_source) = match data.rgb() {
-        Some(rgb) => {
-            let raw: Vec<[u16; 3]> = rgb.map(|(r, g, b)| [r, g, b]).collect();
+    let (intensities, colors, max_color_value, intensity_source) = match has_rgb {
+        true => {
+            let raw = raw_rgb;
             let max = raw.iter().flatten().copied().max().unwrap_or(0);
             let scale = if max <= 255 {
                 ColorScale::EightBit
@@ -140,8 +210,8 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
                 IntensitySource::Color(scale),
             )
         }
-        None => {
-            let raw: Vec<u16> = data.intensity().collect();
+        false => {
+            let raw = raw_intensity;
             let max = raw.iter().copied().max().unwrap_or(0);
             if max == 0 {
                 (

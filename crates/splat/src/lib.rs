@@ -9,7 +9,7 @@ pub mod las_io;
 mod render;
 pub mod rng;
 
-pub use cloud::{Cell, DEFAULT_CELL_SIZE_M, PointCloud, luminance};
+pub use cloud::{Cell, DEFAULT_CELL_SIZE_M, MAX_OFFSET_M, PointCloud, luminance};
 pub use error::SplatError;
 pub use frame::{Frame, PixelStatus};
 pub use las_io::{LasInfo, read_las, write_las};

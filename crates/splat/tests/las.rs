@@ -164,10 +164,70 @@ fn corrupt_truncated_and_missing_files_are_errors() {
         std::fs::write(&path, &bytes[..bytes.len() * 2 / 3]).unwrap();
         let result = std::panic::catch_unwind(|| read_las(&path));
         let result = result.unwrap_or_else(|_| panic!("{name}: reading a truncated file panicked"));
-        assert!(result.is_err(), "{name}: a truncated file was accepted");
+        let message = result
+            .expect_err("a truncated file was accepted")
+            .to_string();
+        assert!(message.contains("truncated"), "{name}: {message}");
         // Only the header: no point.
         std::fs::write(&path, &bytes[..300.min(bytes.len())]).unwrap();
         assert!(read_las(&path).is_err());
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Header fields that lie: a point count far beyond the file (0xFFFFFFFF, or
+/// 100 000 000 in a file of a few kilobytes) is refused from the file's size, before
+/// anything is allocated, with both counts in the message; header bounds of ±1e300
+/// do not move the cloud (its origin comes from the data).
+#[test]
+fn lying_headers_are_refused_or_ignored() {
+    let dir = temp_dir("lying");
+    let positions: Vec<DVec3> = (0..500)
+        .map(|i| DVec3::new(f64::from(i) * 0.01, f64::from(i % 7), 2.0))
+        .collect();
+    let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 500], None, Some(0.01))
+        .unwrap();
+    let path = dir.join("h.las");
+    write_las(&cloud, &path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    // LAS 1.2: the legacy point count at bytes 107..111, bounds at 179..227.
+    for count in [u32::MAX, 100_000_000, 501] {
+        let mut lying = bytes.clone();
+        lying[107..111].copy_from_slice(&count.to_le_bytes());
+        std::fs::write(&path, &lying).unwrap();
+        match read_las(&path) {
+            Err(SplatError::Truncated {
+                announced, found, ..
+            }) => {
+                assert_eq!(announced, u64::from(count));
+                assert!(found.starts_with("500 "), "{found}");
+            }
+            other => panic!("count {count}: {other:?}"),
+        }
+        let message = read_las(&path).unwrap_err().to_string();
+        assert!(message.contains(&count.to_string()), "{message}");
+    }
+    let mut lying = bytes.clone();
+    for (k, v) in [1e300f64, -1e300, 1e300, -1e300, 1e300, -1e300]
+        .iter()
+        .enumerate()
+    {
+        lying[179 + 8 * k..187 + 8 * k].copy_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(&path, &lying).unwrap();
+    let (back, info) = read_las(&path).unwrap();
+    assert_eq!(info.bounds.1.x, 1e300);
+    assert_eq!(back.len(), 500);
+    let (lo, hi) = back.bounds();
+    assert!(lo.is_finite() && hi.is_finite() && (hi - lo).max_element() < 10.0);
+    // Points farther from the origin than f32 positions can hold are refused.
+    let far = [DVec3::ZERO, DVec3::new(2e6, 0.0, 0.0)];
+    assert!(matches!(
+        PointCloud::from_points(DVec3::ZERO, &far, &[0.5, 0.5], None, Some(0.1)),
+        Err(SplatError::Parameter {
+            name: "positions",
+            ..
+        })
+    ));
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -321,9 +321,34 @@ fn city_is_deterministic_and_validated() {
             texture_dir: Some("/nonexistent/textures".into()),
             ..params.clone()
         },
+        // The old documented minimum: 590 million points, refused at once.
+        CityParams {
+            spacing_m: 0.005,
+            ..CityParams::default()
+        },
+        // Arms of 500 m every 2 cm: about 310 million points.
+        CityParams {
+            spacing_m: 0.02,
+            arm_length_m: 500.0,
+            ..CityParams::default()
+        },
     ] {
-        assert!(City::generate(&bad).is_err(), "{bad:?}");
+        let started = std::time::Instant::now();
+        let message = City::generate(&bad).unwrap_err().to_string();
+        assert!(
+            started.elapsed().as_secs_f64() < 1.0,
+            "{bad:?}: refused late"
+        );
+        eprintln!("{message}");
     }
+    // Range errors say the range.
+    let message = City::generate(&CityParams {
+        street_width_m: 2.0,
+        ..params.clone()
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(message.contains("[4, 60] m"), "{message}");
 }
 
 /// Photographic textures from a folder change the city's appearance, not its geometry.

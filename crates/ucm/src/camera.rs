@@ -62,6 +62,9 @@ impl Camera {
         if width == 0 || height == 0 {
             return Err(UcmError::EmptyImage { width, height });
         }
+        if u64::from(width) * u64::from(height) > crate::MAX_PIXELS {
+            return Err(UcmError::TooManyPixels { width, height });
+        }
         region.validate(width, height)?;
         let distortion = distortion.filter(|d| !d.is_identity());
         let valid = region.rasterise(width, height);
@@ -98,21 +101,27 @@ impl Camera {
     /// to pixel centres. An explicit mask cannot be rescaled and is an error
     /// ([`UcmError::MaskSizeMismatch`]).
     pub fn rescaled(&self, factor: u32) -> Result<Self, UcmError> {
+        let (width, height) = match (
+            self.width.checked_mul(factor),
+            self.height.checked_mul(factor),
+        ) {
+            (Some(w), Some(h)) => (w, h),
+            _ => {
+                return Err(UcmError::TooManyPixels {
+                    width: self.width.saturating_mul(factor),
+                    height: self.height.saturating_mul(factor),
+                });
+            }
+        };
         let f = f64::from(factor);
         let (intrinsics, region) = self.scaled(|length| length * f);
         let region = region.map_err(|m| UcmError::MaskSizeMismatch {
             mask_width: m.width(),
             mask_height: m.height(),
-            width: self.width * factor,
-            height: self.height * factor,
+            width,
+            height,
         })?;
-        Self::new(
-            intrinsics,
-            self.distortion,
-            self.width * factor,
-            self.height * factor,
-            region,
-        )
+        Self::new(intrinsics, self.distortion, width, height, region)
     }
 
     /// The same camera (same field of view) at `1/factor` of the resolution, for image

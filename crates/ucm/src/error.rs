@@ -34,6 +34,18 @@ pub enum UcmError {
         /// Height in pixels.
         height: u32,
     },
+    /// More pixels than [`crate::MAX_PIXELS`] (every per-pixel buffer of the crates
+    /// above is sized by the image).
+    #[error(
+        "a {width}x{height} image has more than the {max} pixels a camera may have",
+        max = crate::MAX_PIXELS
+    )]
+    TooManyPixels {
+        /// Width in pixels.
+        width: u32,
+        /// Height in pixels.
+        height: u32,
+    },
     /// The annulus radii are not `0 <= inner < outer`.
     #[error(
         "annulus radii must satisfy 0 <= inner < outer, got inner {inner} px, outer {outer} px"

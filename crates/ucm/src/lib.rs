@@ -12,6 +12,10 @@ mod region;
 pub mod se3;
 
 pub use batch::{PixelGrid, PixelJacobian};
+
+/// Most pixels a camera may have (8192 × 8192): every per-pixel buffer of the crates
+/// that use a camera is sized by its image, so a size read from a file is bounded here.
+pub const MAX_PIXELS: u64 = 1 << 26;
 pub use camera::Camera;
 pub use error::UcmError;
 pub use intrinsics::{Distortion, Intrinsics, Params};

@@ -213,6 +213,25 @@ fn downsampled_camera_is_the_same_camera_at_lower_resolution() {
         Err(ucm::UcmError::EmptyImage { .. })
     ));
     assert!(camera.downsampled(400).is_err());
+    // Sizes beyond MAX_PIXELS, or that overflow, are errors before any allocation.
+    assert!(matches!(
+        camera.rescaled(1 << 20),
+        Err(ucm::UcmError::TooManyPixels { .. })
+    ));
+    assert!(matches!(
+        camera.rescaled(30),
+        Err(ucm::UcmError::TooManyPixels { .. })
+    ));
+    assert!(matches!(
+        Camera::new(
+            *camera.intrinsics(),
+            None,
+            100_000,
+            100_000,
+            ValidRegion::Full
+        ),
+        Err(ucm::UcmError::TooManyPixels { .. })
+    ));
 }
 
 /// The real Mei calibration: ξ ≈ 1.52, distortion and skew.

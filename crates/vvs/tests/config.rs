@@ -28,8 +28,14 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         ("lambda_star_step1 = 100.0", "lambda_star_step1"),
         ("step1_max_iterations = 300", "step1_max_iterations"),
         ("pgm_stride = 0", "pgm_stride"),
-        ("pgm_recursive_from_lambda = 0.0", "pgm_recursive_from_lambda"),
-        ("pgm_recursive_from_lambda = nan", "pgm_recursive_from_lambda"),
+        (
+            "pgm_recursive_from_lambda = 0.0",
+            "pgm_recursive_from_lambda",
+        ),
+        (
+            "pgm_recursive_from_lambda = nan",
+            "pgm_recursive_from_lambda",
+        ),
         ("pyramid_levels = 0", "pyramid_levels"),
         ("pyramid_levels = 6", "pyramid_levels"),
         (

@@ -153,13 +153,14 @@ The largest offset of those run from which every run along the axis (both signs,
             magnitudes,
         ));
     }
-    std::fs::write(out.join("summary.md"), &summary)?;
+    report::write_atomically(&out.join("summary.md"), summary.as_bytes())?;
     report::plot_cdf(
         records,
         threshold_m,
         &out.join("cdf.png"),
         &out.join("cdf.svg"),
     )?;
+    report::finish_results(out)?;
     println!("{summary}");
     println!("results in {}", out.display());
     Ok(())
@@ -180,6 +181,7 @@ fn main() -> anyhow::Result<()> {
                 .as_deref()
                 .map(bench_conv::run::Shard::parse)
                 .transpose()?;
+            bench_conv::report::begin_results(&out)?;
             let (cloud, scene) = bench_conv::run::load_scene(&protocol)?;
             let records = bench_conv::run::run_protocol(&protocol, &cloud, &scene, extras, shard)?;
             let title = match shard {
@@ -204,12 +206,14 @@ fn main() -> anyhow::Result<()> {
         Command::Track { sequence, out } => {
             use bench_conv::tracking;
             let spec = tracking::SequenceSpec::load(&sequence)?;
+            bench_conv::report::begin_results(&out)?;
             let camera = spec.load_camera()?;
             let (cloud, acquired_cloud) = spec.load_clouds()?;
             let (results, acquired) =
                 tracking::run_sequence(&spec, &camera, &cloud, acquired_cloud.as_ref())?;
             let summary =
                 tracking::write_results(&spec, &camera, &cloud, &results, &acquired, &out)?;
+            bench_conv::report::finish_results(&out)?;
             println!("{summary}");
             println!("results in {}", out.display());
         }
@@ -221,7 +225,8 @@ fn main() -> anyhow::Result<()> {
             lambdas,
             out,
         } => {
-            let [x, y, w, h] = bench_conv::parse_numbers::<4>(&crop)?.map(|v| v as u32);
+            let [x, y, w, h] =
+                bench_conv::parse_pixels::<4>(&crop).with_context(|| format!("--crop {crop}"))?;
             let [inner, outer] = bench_conv::parse_numbers::<2>(&annulus)?;
             let probe = ucm::Camera::load_mei_yaml(&mei_yaml, w, h, ucm::ValidRegion::Full)?;
             let i = probe.intrinsics();
@@ -249,7 +254,11 @@ fn main() -> anyhow::Result<()> {
                 .iter()
                 .map(|p| bench_conv::report::read_csv(p))
                 .collect::<anyhow::Result<Vec<_>>>()?;
-            let records = bench_conv::report::merge(parts)?;
+            let mut records = bench_conv::report::merge(parts)?;
+            // Success follows the threshold given here, not the one of the runs.
+            bench_conv::report::apply_threshold(&mut records, threshold_m)
+                .context("--threshold-m")?;
+            bench_conv::report::begin_results(&out)?;
             write_results(&out, "merged", &records, threshold_m, None, None)?;
         }
         Command::City {

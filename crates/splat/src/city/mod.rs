@@ -39,6 +39,23 @@ use crate::rng::{SplitMix64, hash3};
 use crate::{PointCloud, SplatError};
 pub use texture::{ImageTexture, Textures, fbm, value_noise};
 
+/// Smallest point spacing of the city, metres (37 million points with the default
+/// streets).
+pub const MIN_SPACING_M: f64 = 0.02;
+
+/// Most points a generated city may hold (about 5 GB while it is built).
+pub const MAX_POINTS: usize = 60_000_000;
+
+/// About how many points the city of `p` holds: the default city (arms of 60 m,
+/// streets 12 m wide) holds 5.9 million at 0.05 m; the count grows with the arms, the
+/// street width and the inverse square of the spacing.
+fn estimated_points(p: &CityParams) -> f64 {
+    6.0e6
+        * (p.arm_length_m / 60.0)
+        * (p.street_width_m / 12.0).max(1.0)
+        * (0.05 / p.spacing_m).powi(2)
+}
+
 /// Parameters of the synthetic city.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CityParams {
@@ -117,25 +134,27 @@ impl City {
     pub fn generate(params: &CityParams) -> Result<Self, SplatError> {
         let started = Instant::now();
         let p = params;
-        let check = |name: &'static str, ok: bool, value: f64| {
+        let check = |name: &'static str, ok: bool, value: f64, range: String| {
             if ok {
                 Ok(())
             } else {
                 Err(SplatError::Parameter {
                     name,
-                    message: format!("out of range: {value}"),
+                    message: format!("{value} is outside {range}"),
                 })
             }
         };
         check(
             "spacing_m",
-            p.spacing_m.is_finite() && p.spacing_m >= 0.005 && p.spacing_m <= 1.0,
+            p.spacing_m.is_finite() && p.spacing_m >= MIN_SPACING_M && p.spacing_m <= 1.0,
             p.spacing_m,
+            format!("[{MIN_SPACING_M}, 1] m"),
         )?;
         check(
             "street_width_m",
             p.street_width_m.is_finite() && p.street_width_m >= 4.0 && p.street_width_m <= 60.0,
             p.street_width_m,
+            "[4, 60] m".into(),
         )?;
         check(
             "sidewalk_width_m",
@@ -143,6 +162,7 @@ impl City {
                 && p.sidewalk_width_m >= 0.5
                 && p.sidewalk_width_m < p.street_width_m * 0.4,
             p.sidewalk_width_m,
+            format!("[0.5, 0.4 × street_width_m = {}) m", p.street_width_m * 0.4),
         )?;
         check(
             "arm_length_m",
@@ -150,7 +170,23 @@ impl City {
                 && p.arm_length_m >= p.street_width_m
                 && p.arm_length_m <= 500.0,
             p.arm_length_m,
+            format!("[street_width_m = {}, 500] m", p.street_width_m),
         )?;
+        let estimate = estimated_points(p);
+        if estimate > MAX_POINTS as f64 {
+            return Err(SplatError::Parameter {
+                name: "spacing_m",
+                message: format!(
+                    "a city of {} m arms sampled every {} m would hold about {:.0} million \
+                     points, more than the {} million allowed (memory): use a larger spacing \
+                     or shorter arms",
+                    p.arm_length_m,
+                    p.spacing_m,
+                    estimate / 1e6,
+                    MAX_POINTS / 1_000_000
+                ),
+            });
+        }
         let textures = match &p.texture_dir {
             Some(dir) => Textures::from_dir(dir)?,
             None => Textures::default(),
