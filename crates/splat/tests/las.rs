@@ -231,3 +231,27 @@ fn lying_headers_are_refused_or_ignored() {
     ));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A LAZ whose chunk table announces 2³² − 1 chunks (our fuzzing's find: the `laz`
+/// crate allocated the table from that count, 25 GB, and the process aborted) is
+/// refused from the file's size.
+#[test]
+fn laz_chunk_tables_that_lie_are_refused() {
+    let dir = temp_dir("chunks");
+    let positions: Vec<DVec3> = (0..500)
+        .map(|i| DVec3::new(f64::from(i) * 0.01, 0.0, 1.0))
+        .collect();
+    let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 500], None, Some(0.01))
+        .unwrap();
+    let path = dir.join("c.laz");
+    write_las(&cloud, &path).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The chunk table's offset is the first 8 bytes of the point data (offset at 96).
+    let data = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;
+    let table = i64::from_le_bytes(bytes[data..data + 8].try_into().unwrap()) as usize;
+    bytes[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let message = read_las(&path).unwrap_err().to_string();
+    assert!(message.contains("4294967295 chunks"), "{message}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,271 @@
+//! Fuzzing of every parser a user feeds, on stable Rust: each case mutates a valid
+//! input (structure-aware: numbers replaced by extreme values, lines deleted,
+//! duplicated or cut; and byte mutations: flips, insertions, truncation) from a seed
+//! that proptest draws, then parses it. Any outcome but a panic or an abort passes;
+//! inputs are small, and every size read from a file is checked before it is
+//! allocated (a header that announces more than the file holds is an error), so memory
+//! stays bounded. Cases per parser: `FUZZ_CASES` (default 96; CI runs the default).
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use proptest::prelude::*;
+use splat::rng::SplitMix64;
+use test_support::workspace_root as root;
+
+fn cases() -> u32 {
+    std::env::var("FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(96)
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("bench-conv-fuzz-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Values that break careless parsers.
+const EXTREMES: [&str; 14] = [
+    "0",
+    "-1",
+    "1e300",
+    "-1e300",
+    "nan",
+    "inf",
+    "-inf",
+    "4294967295",
+    "18446744073709551615",
+    "100000000000",
+    "1e-300",
+    "0.0",
+    "\"x\"",
+    "[]",
+];
+
+/// A structure-aware mutation of a text file: 1 to 4 edits.
+fn mutate_text(text: &str, seed: u64) -> String {
+    let mut rng = SplitMix64::new(seed);
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    for _ in 0..=rng.below(3) {
+        if lines.is_empty() {
+            break;
+        }
+        let k = rng.below(lines.len() as u64) as usize;
+        match rng.below(6) {
+            // A number (or the value after `=`) replaced by an extreme value.
+            0 | 1 => {
+                let extreme = EXTREMES[rng.below(EXTREMES.len() as u64) as usize];
+                let line = &lines[k];
+                let starts: Vec<usize> = line
+                    .char_indices()
+                    .filter(|&(i, c)| {
+                        (c.is_ascii_digit() || c == '-')
+                            && !line[..i].ends_with(|p: char| p.is_ascii_alphanumeric() || p == '.')
+                    })
+                    .map(|(i, _)| i)
+                    .collect();
+                if let Some(&start) = starts.get(rng.below(starts.len().max(1) as u64) as usize) {
+                    let end = line[start..]
+                        .find(|c: char| !(c.is_ascii_alphanumeric() || "+-.".contains(c)))
+                        .map_or(line.len(), |e| start + e);
+                    lines[k] = format!("{}{extreme}{}", &line[..start], &line[end..]);
+                } else if let Some(eq) = line.find('=') {
+                    lines[k] = format!("{} {extreme}", &line[..=eq]);
+                }
+            }
+            2 => {
+                lines.remove(k);
+            }
+            3 => {
+                let copy = lines[k].clone();
+                lines.insert(k, copy);
+            }
+            4 => {
+                let cut = rng.below(lines[k].len() as u64 + 1) as usize;
+                let cut = (0..=cut)
+                    .rev()
+                    .find(|&c| lines[k].is_char_boundary(c))
+                    .unwrap_or(0);
+                lines[k].truncate(cut);
+            }
+            _ => {
+                let junk = ["[", "]", "=", "\"", ",", "[[desired]]", "{", "\u{0}"];
+                lines[k].push_str(junk[rng.below(junk.len() as u64) as usize]);
+            }
+        }
+    }
+    lines.join("\n")
+}
+
+/// A byte mutation: flips, insertions, a truncation.
+fn mutate_bytes(bytes: &[u8], seed: u64) -> Vec<u8> {
+    let mut rng = SplitMix64::new(seed);
+    let mut out = bytes.to_vec();
+    for _ in 0..=rng.below(8) {
+        if out.is_empty() {
+            break;
+        }
+        let k = rng.below(out.len() as u64) as usize;
+        match rng.below(4) {
+            0 | 1 => out[k] = rng.next_u64() as u8,
+            2 => out.insert(k, rng.next_u64() as u8),
+            _ => {
+                // A header field overwritten with an extreme integer (little endian).
+                let v = [u32::MAX, 0, 1 << 31, 100_000_000][rng.below(4) as usize].to_le_bytes();
+                for (j, b) in v.iter().enumerate() {
+                    if k + j < out.len() {
+                        out[k + j] = *b;
+                    }
+                }
+            }
+        }
+    }
+    if rng.chance(0.3) {
+        let keep = rng.below(out.len() as u64 + 1) as usize;
+        out.truncate(keep);
+    }
+    out
+}
+
+fn small_las(dir: &Path, name: &str) -> Vec<u8> {
+    let positions: Vec<DVec3> = (0..300)
+        .map(|i| DVec3::new(f64::from(i) * 0.02, f64::from(i % 9) * 0.1, 1.0))
+        .collect();
+    let cloud = splat::PointCloud::from_points(
+        DVec3::ZERO,
+        &positions,
+        &vec![0.4; positions.len()],
+        None,
+        Some(0.02),
+    )
+    .unwrap();
+    let path = dir.join(name);
+    splat::write_las(&cloud, &path).unwrap();
+    std::fs::read(&path).unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(cases()))]
+
+    /// LAS and LAZ through our loader: byte mutations of small valid files.
+    #[test]
+    fn las_and_laz_files(seed in any::<u64>(), compressed in any::<bool>()) {
+        let dir = temp("las");
+        let name = if compressed { "c.laz" } else { "c.las" };
+        let valid = small_las(&dir, name);
+        let path = dir.join(format!("m-{seed}-{name}"));
+        std::fs::write(&path, mutate_bytes(&valid, seed)).unwrap();
+        let _ = splat::read_las(&path);
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    /// Camera TOML files (every fixture), structure-aware and byte mutations.
+    #[test]
+    fn camera_toml(seed in any::<u64>(), bytes in any::<bool>()) {
+        for name in ["omni-320x240.toml", "omni-640x480.toml", "omni-wide-400x400.toml"] {
+            let text = std::fs::read_to_string(root().join("fixtures").join(name)).unwrap();
+            let mutated = if bytes {
+                String::from_utf8_lossy(&mutate_bytes(text.as_bytes(), seed)).into_owned()
+            } else {
+                mutate_text(&text, seed)
+            };
+            let _ = ucm::Camera::from_toml_str(&mutated, None);
+        }
+    }
+
+    /// Mei calibrations (omniunwarp YAML), with a crop size drawn too.
+    #[test]
+    fn mei_yaml(seed in any::<u64>(), width in 0u32..5000, height in 0u32..5000) {
+        let dir = temp("mei");
+        let text = "# Intrinsic Matrix\nK: [470.0, 0.9, 615.0,\n    0.0, 463.0, 518.0,\n    \
+                    0.0, 0.0, 1.0\n]\nD: [-0.15, 0.67, -0.02, -0.005]\nXi: [1.5]\n";
+        let path = dir.join(format!("m-{seed}.yaml"));
+        std::fs::write(&path, mutate_text(text, seed)).unwrap();
+        let _ = ucm::Camera::load_mei_yaml(&path, width, height, ucm::ValidRegion::Full);
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    /// Protocol and sequence files (every fixture): parsed and checked, never run.
+    #[test]
+    fn protocol_and_sequence_files(seed in any::<u64>()) {
+        let dir = temp("protocol");
+        for camera in ["omni-320x240.toml", "omni-640x480.toml", "omni-wide-400x400.toml"] {
+            let _ = std::fs::copy(root().join("fixtures").join(camera), dir.join(camera));
+        }
+        for name in [
+            "protocol-fig3.toml",
+            "protocol-fig3-domain.toml",
+            "protocol-global.toml",
+            "sequence-fig4.toml",
+        ] {
+            let text = std::fs::read_to_string(root().join("fixtures").join(name)).unwrap();
+            let path = dir.join(format!("m-{seed}-{name}"));
+            std::fs::write(&path, mutate_text(&text, seed)).unwrap();
+            if name.starts_with("protocol") {
+                let _ = bench_conv::protocol::Protocol::load(&path);
+            } else {
+                let _ = bench_conv::tracking::SequenceSpec::load(&path);
+            }
+            std::fs::remove_file(&path).unwrap();
+        }
+    }
+
+    /// The runs CSV that `merge` reads.
+    #[test]
+    fn runs_csv(seed in any::<u64>(), bytes in any::<bool>()) {
+        let dir = temp("csv");
+        let record = |id: usize| bench_conv::report::RunRecord {
+            run_id: id,
+            scene: "city-1".into(),
+            desired: 0,
+            offset_scale: 1.0,
+            initial: id,
+            method: "rule2/convolved".into(),
+            final_position_error_m: 0.01 * id as f64,
+            final_rotation_error_deg: 0.1,
+            iterations_step1: 10,
+            iterations_step2: 20,
+            stop: "stalled".into(),
+            lambda: 1.0,
+            cost: 0.5,
+            wall_time_s: 1.0,
+            success: id == 0,
+        };
+        let valid = dir.join(format!("v-{seed}.csv"));
+        bench_conv::report::write_csv(&valid, &[record(0), record(1), record(2)]).unwrap();
+        let text = std::fs::read(&valid).unwrap();
+        let mutated = if bytes {
+            mutate_bytes(&text, seed)
+        } else {
+            mutate_text(&String::from_utf8_lossy(&text), seed).into_bytes()
+        };
+        let path = dir.join(format!("m-{seed}.csv"));
+        std::fs::write(&path, mutated).unwrap();
+        if let Ok(records) = bench_conv::report::read_csv(&path) {
+            let _ = bench_conv::report::merge(vec![records]);
+        }
+        std::fs::remove_file(&path).unwrap();
+        std::fs::remove_file(&valid).unwrap();
+    }
+
+    /// Image files for `pgm-image`: byte mutations of a PNG and a JPEG, with crops.
+    #[test]
+    fn image_files(seed in any::<u64>(), jpeg in any::<bool>(), x in 0u32..100, y in 0u32..100) {
+        let dir = temp("image");
+        let name = if jpeg { "i.jpg" } else { "i.png" };
+        let valid = dir.join(format!("v-{seed}-{name}"));
+        image::GrayImage::from_fn(400, 300, |i, j| image::Luma([((i * 7 + j * 3) % 256) as u8]))
+            .save(&valid)
+            .unwrap();
+        let bytes = std::fs::read(&valid).unwrap();
+        let path = dir.join(format!("m-{seed}-{name}"));
+        std::fs::write(&path, mutate_bytes(&bytes, seed)).unwrap();
+        let camera =
+            ucm::Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap();
+        let _ = bench_conv::real_image::load_grey_frame(&path, [x, y, 320, 240], &camera);
+        std::fs::remove_file(&path).unwrap();
+        std::fs::remove_file(&valid).unwrap();
+    }
+}
