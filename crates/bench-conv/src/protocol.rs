@@ -375,7 +375,11 @@ impl Protocol {
         }
         for (k, d) in self.desired.iter().enumerate() {
             self.desired_pose(k)
-                .with_context(|| format!("desired pose {k}: {d:?}"))?;
+                .with_context(|| match (d.looking_down, d.pose) {
+                    (Some(l), _) => format!("desired pose {k}: looking_down = {l:?}"),
+                    (None, Some(p)) => format!("desired pose {k}: pose = {p:?}"),
+                    (None, None) => format!("desired pose {k}"),
+                })?;
         }
         let configs = self.method_configs(true)?;
         let mut names: Vec<&str> = configs.iter().map(|c| c.name.as_str()).collect();

@@ -61,6 +61,156 @@ const HEADER: [&str; 15] = [
     "success",
 ];
 
+/// The file beside a `runs.csv` that says which runs of which protocol it holds, so
+/// that `merge` can tell a complete merge from a partial one.
+pub const MANIFEST: &str = "run.toml";
+
+/// What a results folder of `bench-conv run` holds ([`MANIFEST`]).
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunManifest {
+    /// The protocol's name.
+    pub protocol: String,
+    /// Whether its extra methods ran.
+    pub extras: bool,
+    /// Runs of the whole protocol (every shard).
+    pub total_runs: usize,
+    /// This shard `[i, n]`, or none for the whole protocol.
+    pub shard: Option<[usize; 2]>,
+    /// Rows of the `runs.csv` beside it.
+    pub runs: usize,
+}
+
+/// Write the manifest of the results folder `out`.
+pub fn write_manifest(out: &Path, manifest: &RunManifest) -> anyhow::Result<()> {
+    let text = toml::to_string(manifest).context("encoding the run manifest")?;
+    write_atomically(&out.join(MANIFEST), text.as_bytes())
+}
+
+/// The manifest beside the CSV file `csv`, if there is one.
+pub fn read_manifest(csv: &Path) -> anyhow::Result<Option<RunManifest>> {
+    let path = csv.with_file_name(MANIFEST);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text)
+        .map(Some)
+        .with_context(|| format!("parsing {}", path.display()))
+}
+
+/// Whether merged shards make the whole protocol.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Completeness {
+    /// Every run of the protocol (`shards` shards).
+    Complete {
+        /// The protocol's name.
+        protocol: String,
+        /// Its runs.
+        runs: usize,
+    },
+    /// Some shards are missing.
+    Partial {
+        /// The protocol's name.
+        protocol: String,
+        /// Runs merged.
+        runs: usize,
+        /// Runs of the whole protocol.
+        total_runs: usize,
+        /// Shard count, and the shards missing from the merge.
+        shards: usize,
+        /// Shards not merged.
+        missing: Vec<usize>,
+    },
+    /// Some CSV files have no manifest beside them.
+    Unknown,
+}
+
+impl Completeness {
+    /// One Markdown line for the top of the summary.
+    pub fn markdown(&self) -> String {
+        match self {
+            Completeness::Complete { protocol, runs } => {
+                format!("Complete: all {runs} runs of protocol `{protocol}`.")
+            }
+            Completeness::Partial {
+                protocol,
+                runs,
+                total_runs,
+                shards,
+                missing,
+            } => {
+                let list: Vec<String> = missing.iter().map(|i| format!("{i}/{shards}")).collect();
+                format!(
+                    "**PARTIAL MERGE: {runs} of the {total_runs} runs of protocol `{protocol}`; \
+                     missing shards {}.** The statistics below are not the protocol's.",
+                    list.join(", ")
+                )
+            }
+            Completeness::Unknown => "Completeness unknown: some CSV files have no `run.toml` \
+                 beside them (written by `bench-conv run`)."
+                .into(),
+        }
+    }
+}
+
+/// Check merged shards against their manifests: every CSV must come from the same
+/// protocol, extras and shard count; a shard given twice is an error; shards missing
+/// make the merge [`Completeness::Partial`].
+pub fn completeness(
+    manifests: &[Option<RunManifest>],
+    merged_runs: usize,
+) -> anyhow::Result<Completeness> {
+    let Some(all) = manifests.iter().cloned().collect::<Option<Vec<_>>>() else {
+        return Ok(Completeness::Unknown);
+    };
+    let Some(first) = all.first() else {
+        return Ok(Completeness::Unknown);
+    };
+    let count = first.shard.map_or(1, |[_, n]| n);
+    let mut seen = vec![false; count];
+    for m in &all {
+        if (&m.protocol, m.extras, m.total_runs)
+            != (&first.protocol, first.extras, first.total_runs)
+            || m.shard.map_or(1, |[_, n]| n) != count
+        {
+            bail!(
+                "the CSV files come from different runs: protocol `{}` (extras {}, {} runs, {} shards) \
+                 and `{}` (extras {}, {} runs, {} shards)",
+                first.protocol,
+                first.extras,
+                first.total_runs,
+                count,
+                m.protocol,
+                m.extras,
+                m.total_runs,
+                m.shard.map_or(1, |[_, n]| n)
+            );
+        }
+        let i = m.shard.map_or(0, |[i, _]| i);
+        if i >= count || seen[i] {
+            bail!("shard {i}/{count} is given twice");
+        }
+        seen[i] = true;
+    }
+    let missing: Vec<usize> = (0..count).filter(|&i| !seen[i]).collect();
+    if missing.is_empty() && merged_runs == first.total_runs {
+        Ok(Completeness::Complete {
+            protocol: first.protocol.clone(),
+            runs: merged_runs,
+        })
+    } else {
+        Ok(Completeness::Partial {
+            protocol: first.protocol.clone(),
+            runs: merged_runs,
+            total_runs: first.total_runs,
+            shards: count,
+            missing,
+        })
+    }
+}
+
 /// The file that marks a results folder whose writing has not finished.
 pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
 

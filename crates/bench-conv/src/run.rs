@@ -46,6 +46,21 @@ impl Shard {
     }
 }
 
+/// Refuse a shard that holds no run (more shards than poses), before any work.
+pub fn check_shard(protocol: &Protocol, extras: bool, shard: Option<Shard>) -> anyhow::Result<()> {
+    let Some(s) = shard else { return Ok(()) };
+    let methods = protocol.method_configs(extras)?.len().max(1);
+    let poses = protocol.runs(extras)?.len() / methods;
+    anyhow::ensure!(
+        s.index < poses,
+        "shard {}/{} has no run: the protocol has {poses} poses (desired × initial × scale), \
+         so at most {poses} shards",
+        s.index,
+        s.count
+    );
+    Ok(())
+}
+
 /// Run the protocol (or a shard of it) and return one record per run, in run order.
 pub fn run_protocol(
     protocol: &Protocol,
@@ -61,18 +76,7 @@ pub fn run_protocol(
         .into_iter()
         .filter(|r| shard.is_none_or(|s| s.owns(r.id / methods.len())))
         .collect();
-    if runs.is_empty() {
-        let poses = protocol.desired.len()
-            * protocol.initial_indices().len()
-            * protocol.offsets.scales.len();
-        anyhow::bail!(
-            "{} has no run: the protocol has {poses} poses (desired × initial × scale)",
-            shard.map_or("the protocol".to_string(), |s| format!(
-                "shard {}/{}",
-                s.index, s.count
-            ))
-        );
-    }
+    check_shard(protocol, extras, shard)?;
     // One rule for where a camera may be, the optimiser's own: inside the cloud's
     // bounding box enlarged by `bounds_margin_m` (a street camera, or a camera a few
     // metres from an object scan).

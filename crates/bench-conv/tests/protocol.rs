@@ -524,3 +524,61 @@ fn pixel_counts_parse_strictly() {
         assert!(parse_pixels::<4>(bad).is_err(), "{bad}");
     }
 }
+
+/// `merge` knows the protocol's whole set of runs from the manifests beside the CSV
+/// files: all shards make a complete merge, missing ones a partial merge that says
+/// which, a shard given twice or shards of different protocols are errors, and CSV
+/// files without a manifest leave completeness unknown.
+#[test]
+fn merges_know_whether_they_are_complete() {
+    use bench_conv::report::{
+        Completeness, RunManifest, completeness, read_manifest, write_manifest,
+    };
+    let shard = |i: usize, runs: usize| {
+        Some(RunManifest {
+            protocol: "fig3".into(),
+            extras: false,
+            total_runs: 10,
+            shard: Some([i, 3]),
+            runs,
+        })
+    };
+    assert_eq!(
+        completeness(&[shard(0, 4), shard(1, 3), shard(2, 3)], 10).unwrap(),
+        Completeness::Complete {
+            protocol: "fig3".into(),
+            runs: 10
+        }
+    );
+    let partial = completeness(&[shard(2, 3), shard(0, 4)], 7).unwrap();
+    assert_eq!(
+        partial,
+        Completeness::Partial {
+            protocol: "fig3".into(),
+            runs: 7,
+            total_runs: 10,
+            shards: 3,
+            missing: vec![1]
+        }
+    );
+    assert!(partial.markdown().contains("PARTIAL") && partial.markdown().contains("1/3"));
+    let twice = format!(
+        "{:#}",
+        completeness(&[shard(0, 4), shard(0, 4)], 8).unwrap_err()
+    );
+    assert!(twice.contains("given twice"), "{twice}");
+    let mut other = shard(1, 3);
+    if let Some(m) = &mut other {
+        m.protocol = "fig3-domain".into();
+    }
+    assert!(completeness(&[shard(0, 4), other], 7).is_err());
+    assert_eq!(
+        completeness(&[shard(0, 4), None], 7).unwrap(),
+        Completeness::Unknown
+    );
+    // Through the file beside a runs.csv.
+    let dir = temp("manifest");
+    write_manifest(&dir, shard(2, 3).as_ref().unwrap()).unwrap();
+    assert_eq!(read_manifest(&dir.join("runs.csv")).unwrap(), shard(2, 3));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

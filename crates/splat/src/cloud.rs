@@ -119,9 +119,9 @@ impl PointCloud {
             });
         }
         if !origin.is_finite() {
-            return Err(SplatError::NonFinitePoint {
-                index: usize::MAX,
-                value: origin.to_array(),
+            return Err(SplatError::Parameter {
+                name: "origin",
+                message: format!("the cloud's origin {origin} is not finite"),
             });
         }
         for (index, p) in positions.iter().enumerate() {

@@ -16,15 +16,16 @@ pub enum SplatError {
     },
     /// A LAS/LAZ file that holds fewer points than its header announces.
     #[error(
-        "LAS/LAZ file {path} is truncated or its header lies: its header announces {announced} points (0: unread), the file holds {found}"
+        "LAS/LAZ file {path} is truncated or its header lies: {}the file holds {found}",
+        announced.map_or(String::new(), |n| format!("its header announces {n} points, "))
     )]
     Truncated {
         /// The file.
         path: PathBuf,
-        /// The header's point count.
-        announced: u64,
+        /// The header's point count, if the header could be read.
+        announced: Option<u64>,
         /// What the file holds instead (for LAS, the points its bytes hold; for LAZ,
-        /// the whole chunks decompressed before its data ended).
+        /// the points decompressed before its data ended).
         found: String,
     },
     /// A cloud with no point.

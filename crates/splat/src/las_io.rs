@@ -20,7 +20,7 @@ use glam::DVec3;
 use crate::{PointCloud, SplatError};
 
 /// Points read from a LAS/LAZ file at a time.
-const LAS_CHUNK_POINTS: u64 = 1 << 20;
+const LAS_CHUNK_POINTS: u64 = 50_000;
 
 /// Intensity of every point of a cloud that has neither colour nor intensity.
 pub const CONSTANT_INTENSITY: f32 = 0.5;
@@ -103,7 +103,7 @@ fn check_laz_chunk_table(path: &Path, data_start: u64, file_bytes: u64) -> Resul
     if chunks > file_bytes {
         return Err(SplatError::Truncated {
             path: path.to_owned(),
-            announced: 0,
+            announced: None,
             found: format!("a chunk table of {chunks} chunks in {file_bytes} bytes (corrupt)"),
         });
     }
@@ -140,6 +140,21 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
         .and_then(|file| {
             las::raw::Header::read_from(std::io::BufReader::new(file)).map_err(las_error(path))
         })?;
+    let scales = [raw.x_scale_factor, raw.y_scale_factor, raw.z_scale_factor];
+    let offsets = [raw.x_offset, raw.y_offset, raw.z_offset];
+    if !scales.iter().all(|s| s.is_finite() && *s != 0.0) || !offsets.iter().all(|o| o.is_finite())
+    {
+        return Err(SplatError::Las {
+            path: path.to_owned(),
+            source: Box::new(las::Error::Io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "the header's scale factors {scales:?} must be finite and non-zero, its \
+                     offsets {offsets:?} finite"
+                ),
+            ))),
+        });
+    }
     if raw.point_data_record_format & 0x80 != 0 {
         check_laz_chunk_table(path, u64::from(raw.offset_to_point_data), file_bytes)?;
     }
@@ -147,7 +162,7 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
         if ends_early(&e) {
             SplatError::Truncated {
                 path: path.to_owned(),
-                announced: 0,
+                announced: None,
                 found: "too few bytes for its header, its point data or its chunk table".into(),
             }
         } else {
@@ -173,8 +188,11 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
         if announced > room / record_bytes {
             return Err(SplatError::Truncated {
                 path: path.to_owned(),
-                announced,
-                found: format!("{} (its {room} bytes of points)", room / record_bytes),
+                announced: Some(announced),
+                found: format!(
+                    "{} points (its {room} bytes of points)",
+                    room / record_bytes
+                ),
             });
         }
     }
@@ -210,8 +228,12 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
     if read < announced {
         return Err(SplatError::Truncated {
             path: path.to_owned(),
-            announced,
-            found: format!("{read} in whole chunks of {LAS_CHUNK_POINTS} before its data ends"),
+            announced: Some(announced),
+            found: format!(
+                "{read} points before its data ends (read by chunks of {LAS_CHUNK_POINTS}: up to \
+                 {} more in the last one)",
+                LAS_CHUNK_POINTS - 1
+            ),
         });
     }
     if positions.is_empty() {
@@ -290,6 +312,16 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
 /// no colour).
 pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), SplatError> {
     let path = path.as_ref();
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(extension.as_deref(), Some("las" | "laz")) {
+        return Err(SplatError::Parameter {
+            name: "path",
+            message: format!("{} must end in .las or .laz", path.display()),
+        });
+    }
     let err = las_error(path);
     let mut builder = las::Builder::from((1, 2));
     builder.point_format = las::point::Format::new(2).map_err(&err)?;

@@ -49,7 +49,7 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
         /// Success threshold, metres.
-        #[arg(long, default_value_t = 0.02)]
+        #[arg(long, default_value_t = 0.02, allow_negative_numbers = true)]
         threshold_m: f64,
     },
     /// The PGM of a real catadioptric image at several λ (the paper's Fig. 1).
@@ -114,18 +114,29 @@ enum Command {
     },
 }
 
+#[allow(clippy::too_many_arguments)]
 fn write_results(
     out: &std::path::Path,
     title: &str,
+    note: Option<&str>,
     records: &[bench_conv::report::RunRecord],
     threshold_m: f64,
     wall_time_s: Option<f64>,
     axes: Option<[f64; 6]>,
+    manifest: Option<&bench_conv::report::RunManifest>,
 ) -> anyhow::Result<()> {
     use bench_conv::report;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     report::write_csv(&out.join("runs.csv"), records)?;
+    if let Some(manifest) = manifest {
+        report::write_manifest(out, manifest)?;
+    }
     let mut summary = report::summary_markdown(title, records, threshold_m, wall_time_s);
+    if let Some(note) = note {
+        // After the title line.
+        let at = summary.find('\n').map_or(summary.len(), |i| i + 1);
+        summary.insert_str(at, &format!("\n{note}\n"));
+    }
     let domain = report::domain(records);
     if domain
         .iter()
@@ -181,6 +192,7 @@ fn main() -> anyhow::Result<()> {
                 .as_deref()
                 .map(bench_conv::run::Shard::parse)
                 .transpose()?;
+            bench_conv::run::check_shard(&protocol, extras, shard)?;
             bench_conv::report::begin_results(&out)?;
             let (cloud, scene) = bench_conv::run::load_scene(&protocol)?;
             let records = bench_conv::run::run_protocol(&protocol, &cloud, &scene, extras, shard)?;
@@ -188,9 +200,17 @@ fn main() -> anyhow::Result<()> {
                 Some(s) => format!("{} (shard {}/{})", protocol.name, s.index, s.count),
                 None => protocol.name.clone(),
             };
+            let manifest = bench_conv::report::RunManifest {
+                protocol: protocol.name.clone(),
+                extras,
+                total_runs: protocol.runs(extras)?.len(),
+                shard: shard.map(|s| [s.index, s.count]),
+                runs: records.len(),
+            };
             write_results(
                 &out,
                 &title,
+                None,
                 &records,
                 protocol.success_threshold_m,
                 Some(started.elapsed().as_secs_f64()),
@@ -201,6 +221,7 @@ fn main() -> anyhow::Result<()> {
                     );
                     [t[0], t[1], t[2], r[0], r[1], r[2]]
                 }),
+                Some(&manifest),
             )?;
         }
         Command::Track { sequence, out } => {
@@ -254,12 +275,49 @@ fn main() -> anyhow::Result<()> {
                 .iter()
                 .map(|p| bench_conv::report::read_csv(p))
                 .collect::<anyhow::Result<Vec<_>>>()?;
+            let manifests = csv
+                .iter()
+                .map(|p| bench_conv::report::read_manifest(p))
+                .collect::<anyhow::Result<Vec<_>>>()?;
             let mut records = bench_conv::report::merge(parts)?;
+            anyhow::ensure!(
+                !records.is_empty(),
+                "the CSV files hold no run: nothing to merge"
+            );
+            let completeness = bench_conv::report::completeness(&manifests, records.len())?;
             // Success follows the threshold given here, not the one of the runs.
             bench_conv::report::apply_threshold(&mut records, threshold_m)
                 .context("--threshold-m")?;
             bench_conv::report::begin_results(&out)?;
-            write_results(&out, "merged", &records, threshold_m, None, None)?;
+            let (title, manifest) = match &completeness {
+                bench_conv::report::Completeness::Complete { protocol, runs } => (
+                    format!("{protocol} (merged)"),
+                    manifests[0]
+                        .clone()
+                        .map(|m| bench_conv::report::RunManifest {
+                            shard: None,
+                            runs: *runs,
+                            ..m
+                        }),
+                ),
+                bench_conv::report::Completeness::Partial { protocol, .. } => {
+                    (format!("{protocol} (PARTIAL merge)"), None)
+                }
+                bench_conv::report::Completeness::Unknown => ("merged".to_string(), None),
+            };
+            if let bench_conv::report::Completeness::Partial { .. } = completeness {
+                eprintln!("warning: {}", completeness.markdown().replace("**", ""));
+            }
+            write_results(
+                &out,
+                &title,
+                Some(&completeness.markdown()),
+                &records,
+                threshold_m,
+                None,
+                None,
+                manifest.as_ref(),
+            )?;
         }
         Command::City {
             out,
@@ -273,6 +331,22 @@ fn main() -> anyhow::Result<()> {
                 texture_dir: textures,
                 ..CityParams::default()
             };
+            // Fail before the work: a wrong extension or a folder that does not exist.
+            let extension = out
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase);
+            anyhow::ensure!(
+                matches!(extension.as_deref(), Some("las" | "laz")),
+                "--out {} must end in .las or .laz",
+                out.display()
+            );
+            let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
+            anyhow::ensure!(
+                folder.is_none_or(|p| p.is_dir()),
+                "--out {}: the folder does not exist",
+                out.display()
+            );
             let city = City::generate(&params)?;
             println!(
                 "generated {} points in {:.2} s",
