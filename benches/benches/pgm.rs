@@ -39,17 +39,23 @@ fn reference_pgm(image: &[f32], width: usize, height: usize, lambda: f32, out: &
     }
 }
 
+/// The fixture camera `name` and its rendering of the city from `pose`.
+fn street_view(city: &City, pose: &ucm::Isometry3, name: &str) -> (ucm::Camera, Frame) {
+    let camera = fixture_camera(name);
+    let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+    let mut frame = Frame::for_camera(&camera);
+    renderer.render(&city.cloud, pose, &mut frame).unwrap();
+    (camera, frame)
+}
+
 fn features(c: &mut Criterion) {
     let city = City::generate(&CityParams::default()).unwrap();
     let pose = camera_looking_down(DVec3::new(-20.0, 0.8, 3.0), 0.05).inverse();
     let mut group = c.benchmark_group("features");
     group.sample_size(10);
     for name in ["omni-320x240.toml", "omni-640x480.toml"] {
-        let camera = fixture_camera(name);
+        let (camera, frame) = street_view(&city, &pose, name);
         let w = camera.width();
-        let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
-        let mut frame = Frame::for_camera(&camera);
-        renderer.render(&city.cloud, &pose, &mut frame).unwrap();
         group.throughput(Throughput::Elements(camera.pixel_count() as u64));
         let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
         for lambda in [1.0f32, 5.0, 15.0, 30.0] {
@@ -134,11 +140,8 @@ fn goal_features(c: &mut Criterion) {
     let mut group = c.benchmark_group("goal_features_le_2ms_320_le_6ms_640");
     group.sample_size(20);
     for (name, bound_ms) in [("omni-320x240.toml", 2), ("omni-640x480.toml", 6)] {
-        let camera = fixture_camera(name);
+        let (camera, frame) = street_view(&city, &pose, name);
         let w = camera.width();
-        let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
-        let mut frame = Frame::for_camera(&camera);
-        renderer.render(&city.cloud, &pose, &mut frame).unwrap();
         group.throughput(Throughput::Elements(camera.pixel_count() as u64));
         let one_thread = PgmOptions {
             parallel: false,
