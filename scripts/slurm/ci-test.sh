@@ -18,13 +18,17 @@ if ! command -v sbatch > /dev/null || ! command -v munged > /dev/null; then
     sudo=()
     if [ "$(id -u)" -ne 0 ]; then sudo=(sudo); fi
     export DEBIAN_FRONTEND=noninteractive
-    "${sudo[@]}" apt-get update -q > "$work/apt.log" 2>&1
-    "${sudo[@]}" apt-get install -y -q slurm-wlm munge >> "$work/apt.log" 2>&1 || { cat "$work/apt.log"; exit 1; }
+    timeout 300 "${sudo[@]}" apt-get update -q > "$work/apt.log" 2>&1
+    timeout 300 "${sudo[@]}" apt-get install -y -q slurm-wlm munge >> "$work/apt.log" 2>&1 || { cat "$work/apt.log"; exit 1; }
 fi
 
 started=()
 stop() {
-    if [ -n "${SLURM_CONF:-}" ]; then scontrol shutdown > /dev/null 2>&1 || true; fi
+    if [ -n "${SLURM_CONF:-}" ]; then
+        scancel --full --user=root > /dev/null 2>&1 || true
+        sleep 1
+        scontrol shutdown > /dev/null 2>&1 || true
+    fi
     sleep 1
     for pid in "${started[@]}"; do kill "$pid" 2> /dev/null || true; done
     if [ -n "${munge_pid:-}" ]; then kill "$munge_pid" 2> /dev/null || true; fi
@@ -107,7 +111,9 @@ import csv, sys
 rows = list(csv.reader(open(sys.argv[1])))
 t = rows[0].index("wall_time_s")
 for r in rows: print(",".join(v for i, v in enumerate(r) if i != t))' "$1"; }
-if ! diff <(strip "$work/single/runs.csv") <(strip "$results/merged/runs.csv"); then
+strip "$work/single/runs.csv" > "$work/single.rows"
+strip "$results/merged/runs.csv" > "$work/merged.rows"
+if [ "$(wc -l < "$work/single.rows")" -lt 2 ] || ! diff "$work/single.rows" "$work/merged.rows"; then
     echo "the Slurm merge differs from the single run"
     exit 1
 fi

@@ -218,15 +218,19 @@ pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
 /// once and an interrupted run never leaves a folder that looks complete: the folder
 /// is created (an existing file there is an error), a stale `summary.md` is removed,
 /// and [`INCOMPLETE_MARKER`] is written until [`finish_results`].
+/// Stale `runs.csv` and [`MANIFEST`] go too.
 pub fn begin_results(out: &Path) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         bail!("{} exists and is not a folder", out.display());
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let summary = out.join("summary.md");
-    if summary.exists() {
-        std::fs::remove_file(&summary)
-            .with_context(|| format!("removing the stale {}", summary.display()))?;
+    // Stale results of an earlier run must not survive beside new ones.
+    for name in ["summary.md", "runs.csv", MANIFEST] {
+        let stale = out.join(name);
+        if stale.exists() {
+            std::fs::remove_file(&stale)
+                .with_context(|| format!("removing the stale {}", stale.display()))?;
+        }
     }
     write_atomically(
         &out.join(INCOMPLETE_MARKER),
@@ -288,6 +292,13 @@ pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
 /// that are NaN, infinite or negative, and an offset scale that is not positive, are
 /// refused (no statistic is computed from them).
 pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
+    if path.with_file_name(INCOMPLETE_MARKER).exists() {
+        bail!(
+            "{}: its folder is marked {INCOMPLETE_MARKER} (its run was interrupted or is \
+             still writing)",
+            path.display()
+        );
+    }
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_path(path)

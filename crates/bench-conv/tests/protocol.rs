@@ -354,6 +354,9 @@ fn csv_thresholds_and_results_folders_are_safe() {
     std::fs::write(out.join("summary.md"), "stale").unwrap();
     begin_results(&out).unwrap();
     assert!(out.join(INCOMPLETE_MARKER).exists() && !out.join("summary.md").exists());
+    // A CSV beside the marker (an interrupted run) is refused by merge's reader.
+    write_csv(&out.join("runs.csv"), &records).unwrap();
+    assert!(read_csv(&out.join("runs.csv")).is_err());
     finish_results(&out).unwrap();
     assert!(!out.join(INCOMPLETE_MARKER).exists());
     let message = format!("{:#}", begin_results(&path).unwrap_err());

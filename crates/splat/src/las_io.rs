@@ -6,8 +6,9 @@
 //! * **Without colour**, a point's intensity is its LAS `intensity` attribute divided
 //!   by the largest intensity of the file; if every intensity is zero, every point gets
 //!   the constant [`CONSTANT_INTENSITY`].
-//! * The cloud's origin is the header's minimum corner, rounded down to the metre, so
-//!   that `f32` positions keep millimetre precision on georeferenced data.
+//! * The cloud's origin is the points' minimum corner (not the header's bounds, which
+//!   may lie), rounded down to the metre, so that `f32` positions keep millimetre
+//!   precision on georeferenced data.
 //! * Writing uses LAS 1.2 point format 2 (position and colour, 16-bit full range,
 //!   millimetre resolution); a `.laz` extension compresses. A cloud without colour
 //!   is written in grey levels of its intensity, so that it renders the same when
