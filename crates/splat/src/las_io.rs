@@ -308,11 +308,9 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
     ))
 }
 
-/// Write a cloud as LAS (or LAZ, by the `.laz` extension): LAS 1.2, point format 2,
-/// millimetre resolution, 16-bit colour (grey levels of the intensity if the cloud has
-/// no colour).
-pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), SplatError> {
-    let path = path.as_ref();
+/// Check that `path` can name a cloud to write: it ends in `.las` or `.laz` (any case),
+/// and its folder exists. [`write_las`] checks it; call it before long work too.
+pub fn check_las_path(path: &Path) -> Result<(), SplatError> {
     let extension = path
         .extension()
         .and_then(|e| e.to_str())
@@ -323,6 +321,27 @@ pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), Splat
             message: format!("{} must end in .las or .laz", path.display()),
         });
     }
+    if let Some(folder) = path.parent().filter(|p| !p.as_os_str().is_empty())
+        && !folder.is_dir()
+    {
+        return Err(SplatError::Parameter {
+            name: "path",
+            message: format!(
+                "{}: the folder {} does not exist",
+                path.display(),
+                folder.display()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Write a cloud as LAS (or LAZ, by the `.laz` extension): LAS 1.2, point format 2,
+/// millimetre resolution, 16-bit colour (grey levels of the intensity if the cloud has
+/// no colour).
+pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), SplatError> {
+    let path = path.as_ref();
+    check_las_path(path)?;
     let err = las_error(path);
     let mut builder = las::Builder::from((1, 2));
     builder.point_format = las::point::Format::new(2).map_err(&err)?;

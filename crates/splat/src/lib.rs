@@ -12,5 +12,5 @@ pub mod rng;
 pub use cloud::{Cell, DEFAULT_CELL_SIZE_M, MAX_OFFSET_M, PointCloud, luminance};
 pub use error::SplatError;
 pub use frame::{Frame, PixelStatus};
-pub use las_io::{LasInfo, read_las, write_las};
+pub use las_io::{LasInfo, check_las_path, read_las, write_las};
 pub use render::{RenderOptions, RenderStats, Renderer};

@@ -229,6 +229,11 @@ fn lying_headers_are_refused_or_ignored() {
             ..
         })
     ));
+    // Output paths: .las/.laz in an existing folder only.
+    assert!(splat::check_las_path(&dir.join("c.LAZ")).is_ok());
+    assert!(splat::check_las_path(&dir.join("c.txt")).is_err());
+    assert!(splat::check_las_path(&dir.join("missing/c.las")).is_err());
+    assert!(write_las(&cloud, dir.join("c.txt")).is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -332,21 +332,7 @@ fn main() -> anyhow::Result<()> {
                 ..CityParams::default()
             };
             // Fail before the work: a wrong extension or a folder that does not exist.
-            let extension = out
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(str::to_ascii_lowercase);
-            anyhow::ensure!(
-                matches!(extension.as_deref(), Some("las" | "laz")),
-                "--out {} must end in .las or .laz",
-                out.display()
-            );
-            let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
-            anyhow::ensure!(
-                folder.is_none_or(|p| p.is_dir()),
-                "--out {}: the folder does not exist",
-                out.display()
-            );
+            splat::check_las_path(&out)?;
             let city = City::generate(&params)?;
             println!(
                 "generated {} points in {:.2} s",
