@@ -7,10 +7,11 @@
 use benches::fixture_camera;
 use brightness::{Brightness, normal_equations};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use frame::Frame;
 use glam::DVec3;
 use pgm::{Pgm, PgmJacobian, PgmOptions};
 use splat::city::{City, CityParams, camera_looking_down};
-use splat::{Frame, RenderOptions, Renderer};
+use splat::{RenderOptions, Renderer};
 use std::hint::black_box;
 
 /// Eq. (1) literally: for each sample, the window sum over `|d| ≤ 4λ`.

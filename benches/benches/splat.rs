@@ -4,9 +4,10 @@
 
 use benches::fixture_camera;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use frame::Frame;
 use glam::DVec3;
 use splat::city::{City, CityParams, camera_looking_down};
-use splat::{Frame, RenderOptions, Renderer};
+use splat::{RenderOptions, Renderer};
 
 fn render(c: &mut Criterion) {
     let mut group = c.benchmark_group("splat");

@@ -3,52 +3,16 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, ensure};
+use anyhow::Context;
+use frame::Image;
 use pgm::{Pgm, PgmOptions};
-use splat::{Frame, PixelStatus};
 use ucm::Camera;
-
-/// A real image, cropped to the calibrated region and converted to grey levels in
-/// `[0, 1]`, as a frame of `camera` (every valid pixel a hit at unknown range).
-pub fn load_grey_frame(image: &Path, crop: [u32; 4], camera: &Camera) -> anyhow::Result<Frame> {
-    let picture = image::open(image)
-        .with_context(|| format!("reading {}", image.display()))?
-        .into_luma8();
-    let [x, y, w, h] = crop;
-    ensure!(
-        u64::from(x) + u64::from(w) <= u64::from(picture.width())
-            && u64::from(y) + u64::from(h) <= u64::from(picture.height()),
-        "crop {crop:?} exceeds the {}x{} image",
-        picture.width(),
-        picture.height()
-    );
-    ensure!(
-        (w, h) == (camera.width(), camera.height()),
-        "crop is {w}x{h} but the camera is {}x{}",
-        camera.width(),
-        camera.height()
-    );
-    let cropped = image::imageops::crop_imm(&picture, x, y, w, h).to_image();
-    let mut frame = Frame::for_camera(camera);
-    for (k, p) in cropped.pixels().enumerate() {
-        if camera.valid_pixels()[k] {
-            frame.intensity[k] = f32::from(p.0[0]) / 255.0;
-            frame.range_m[k] = f32::INFINITY;
-            frame.status[k] = PixelStatus::Hit;
-        } else {
-            frame.intensity[k] = 0.0;
-            frame.range_m[k] = f32::NAN;
-            frame.status[k] = PixelStatus::Masked;
-        }
-    }
-    Ok(frame)
-}
 
 /// Write `input.png`, `pgm-lambda<λ>.png` (each scaled to its own maximum, masked
 /// pixels black) and `fig1.png` (all of them side by side, at most 320 pixels wide each)
 /// under `out`; returns the written files.
 pub fn write_pgm_images(
-    frame: &Frame,
+    image: &Image,
     camera: &Camera,
     lambdas: &[f32],
     out: &Path,
@@ -56,15 +20,14 @@ pub fn write_pgm_images(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut written = Vec::new();
     let input = out.join("input.png");
-    frame.save_png(&input)?;
+    image.save_png(&input)?;
     written.push(input);
     let mut pgm = Pgm::new(camera, PgmOptions::default())?;
     for &lambda in lambdas {
-        pgm.transform(frame, lambda)?;
+        pgm.transform(image, lambda)?;
         let g = pgm.values();
         let max = g.iter().copied().fold(f32::MIN_POSITIVE, f32::max);
-        let mut shown = Frame::for_camera(camera);
-        shown.status.clone_from(&frame.status);
+        let mut shown = image.clone();
         for (&k, &v) in pgm.samples().iter().zip(g) {
             shown.intensity[k as usize] = v / max;
         }

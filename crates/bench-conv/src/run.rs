@@ -102,7 +102,7 @@ pub fn run_protocol(
     }
     // Desired images, rendered once.
     let mut renderer = Servo::new(cloud, &camera, methods[0].config.clone())?;
-    let desired_images: Vec<splat::Frame> = (0..protocol.desired.len())
+    let desired_images: Vec<frame::Frame> = (0..protocol.desired.len())
         .map(|k| Ok(renderer.render(&protocol.desired_pose(k)?)?))
         .collect::<anyhow::Result<_>>()?;
 

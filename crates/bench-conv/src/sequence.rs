@@ -30,10 +30,10 @@
 //! clamping to `[0, 1]`. Every random draw is seeded: the same file gives the same
 //! images.
 
+use frame::{Frame, PixelStatus};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use splat::rng::SplitMix64;
-use splat::{Frame, PixelStatus};
 use ucm::{Camera, Isometry3, ValidRegion};
 
 /// Most frames a sequence may have: every frame is rendered and kept (about 70 KB

@@ -32,9 +32,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail, ensure};
+use frame::Frame;
 use rayon::prelude::*;
 use serde::Deserialize;
-use splat::{Frame, PointCloud, RenderOptions, Renderer};
+use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 use vvs::{Method, Servo, StopReason, VvsConfig};
 
@@ -663,7 +664,7 @@ pub fn write_overlay(acquired: &Frame, rendered: &Frame, path: &Path) -> anyhow:
     let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     let mut image = image::RgbImage::new(w, h);
     for (i, pixel) in image.pixels_mut().enumerate() {
-        if rendered.status[i] == splat::PixelStatus::Masked {
+        if rendered.status[i] == frame::PixelStatus::Masked {
             continue;
         }
         let (a, r) = (to_u8(acquired.intensity[i]), to_u8(rendered.intensity[i]));

@@ -264,7 +264,7 @@ proptest! {
         std::fs::write(&path, mutate_bytes(&bytes, seed)).unwrap();
         let camera =
             ucm::Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap();
-        let _ = bench_conv::real_image::load_grey_frame(&path, [x, y, 320, 240], &camera);
+        let _ = frame::Image::load(&path, &camera, Some([x, y, 320, 240]));
         std::fs::remove_file(&path).unwrap();
         std::fs::remove_file(&valid).unwrap();
     }

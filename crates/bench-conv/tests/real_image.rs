@@ -1,6 +1,7 @@
 //! The PGM of the real catadioptric image of `../shared/data` (the paper's Fig. 1).
 
-use bench_conv::real_image::{load_grey_frame, write_pgm_images};
+use bench_conv::real_image::write_pgm_images;
+use frame::Image;
 use pgm::{Pgm, PgmOptions};
 use test_support::data_dir;
 
@@ -36,13 +37,13 @@ fn pgm_of_the_real_catadioptric_image_smooths_with_lambda() {
             outer_radius_px: 470.0,
         }))
         .unwrap();
-    let frame = load_grey_frame(
-        &data.join("catadioptric/omniunwarp-example.jpg"),
-        [310, 80, 1230, 1000],
+    let frame = Image::load(
+        data.join("catadioptric/omniunwarp-example.jpg"),
         &camera,
+        Some([310, 80, 1230, 1000]),
     )
     .unwrap();
-    let hits = frame.counts().0;
+    let hits = frame.valid_count();
     assert!(hits > 600_000, "{hits}");
     let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
     let mut last = f64::INFINITY;
@@ -60,37 +61,12 @@ fn pgm_of_the_real_catadioptric_image_smooths_with_lambda() {
     }
     // A crop that does not match the camera is an error.
     assert!(
-        load_grey_frame(
-            &data.join("catadioptric/omniunwarp-example.jpg"),
-            [0, 0, 100, 100],
-            &camera
+        Image::load(
+            data.join("catadioptric/omniunwarp-example.jpg"),
+            &camera,
+            Some([0, 0, 100, 100]),
         )
         .is_err()
     );
     std::fs::remove_dir_all(&out).unwrap();
-}
-
-/// A crop whose corner overflows `u32` (the `--crop 1e10,…` of the hardening issue,
-/// once parsed) is an error, not a wrapped check and a black image.
-#[test]
-fn crops_beyond_the_image_are_errors() {
-    let dir = std::env::temp_dir().join(format!("bench-conv-crop-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("small.png");
-    image::GrayImage::from_pixel(400, 300, image::Luma([128u8]))
-        .save(&path)
-        .unwrap();
-    let camera =
-        ucm::Camera::load_toml(test_support::workspace_root().join("fixtures/omni-320x240.toml"))
-            .unwrap();
-    assert!(load_grey_frame(&path, [10, 10, 320, 240], &camera).is_ok());
-    for crop in [
-        [u32::MAX - 5, 0, 320, 240],
-        [0, u32::MAX - 100, 320, 240],
-        [81, 0, 320, 240],
-    ] {
-        let message = format!("{:#}", load_grey_frame(&path, crop, &camera).unwrap_err());
-        assert!(message.contains("exceeds"), "{crop:?}: {message}");
-    }
-    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -4,7 +4,7 @@ use bench_conv::sequence::{Acquisition, Trajectory};
 use bench_conv::tracking::{
     SequenceSpec, TrackingResults, read_csv, run_sequence, summarize, write_csv, write_results,
 };
-use splat::{Frame, PixelStatus};
+use frame::{Frame, PixelStatus};
 use test_support::workspace_root as root;
 use ucm::Camera;
 

@@ -1,6 +1,6 @@
 //! [`Brightness`]: intensities of the valid pixels and their interaction matrix.
 
-use splat::{Frame, PixelStatus};
+use frame::AnyImage;
 use ucm::{Camera, PixelGrid};
 
 use crate::{BrightnessError, masked_gradient};
@@ -60,24 +60,26 @@ impl Brightness {
         self
     }
 
-    /// Compute values and interaction matrix from a rendered or acquired frame.
-    /// Masked pixels are ignored; sky pixels have `1/ρ = 0`.
-    pub fn compute(&mut self, frame: &Frame) -> Result<(), BrightnessError> {
-        if frame.width() as usize != self.width || frame.height() as usize != self.height {
+    /// Compute values and interaction matrix from a rendered frame or a measured image.
+    /// Pixels not observed are ignored (intensity 0); sky pixels, and every pixel of a
+    /// measured image, have `1/ρ = 0`.
+    pub fn compute(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
+        if picture.width() as usize != self.width || picture.height() as usize != self.height {
             return Err(BrightnessError::ImageSize {
-                got_width: frame.width(),
-                got_height: frame.height(),
+                got_width: picture.width(),
+                got_height: picture.height(),
                 width: self.width as u32,
                 height: self.height as u32,
             });
         }
         let valid = self.grid.valid();
-        frame
+        picture
             .inverse_range(&mut self.inverse_range)
-            .expect("frame size checked above");
+            .expect("picture size checked above");
+        let intensity = picture.intensity();
         for k in 0..self.image.len() {
-            let seen = valid[k] && frame.status[k] != PixelStatus::Masked;
-            self.image[k] = if seen { frame.intensity[k] } else { 0.0 };
+            let seen = valid[k] && picture.is_observed(k);
+            self.image[k] = if seen { intensity[k] } else { 0.0 };
             if !valid[k] {
                 self.inverse_range[k] = 0.0;
             }

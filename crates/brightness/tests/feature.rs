@@ -1,6 +1,6 @@
 use brightness::{Brightness, masked_gradient, normal_equations};
+use frame::{Frame, PixelStatus};
 use proptest::prelude::*;
-use splat::{Frame, PixelStatus};
 use ucm::{Camera, Intrinsics, PixelGrid, ValidRegion};
 
 #[test]

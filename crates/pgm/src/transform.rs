@@ -2,7 +2,7 @@
 //! λ-derivative and its interaction matrix, on a fixed sample grid.
 
 use brightness::Brightness;
-use splat::Frame;
+use frame::AnyImage;
 use ucm::Camera;
 
 use crate::PgmError;
@@ -232,9 +232,9 @@ impl Pgm {
     }
 
     /// `G(I, λ)` at the samples only (for the desired image).
-    pub fn transform(&mut self, frame: &Frame, lambda: f32) -> Result<&[f32], PgmError> {
+    pub fn transform(&mut self, picture: &impl AnyImage, lambda: f32) -> Result<&[f32], PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute(frame)?;
+        self.brightness.compute(picture)?;
         if let Some(f) = self.filters(lambda) {
             self.recursive_g_j(&f, false);
             return Ok(&self.values);
@@ -269,12 +269,12 @@ impl Pgm {
     /// `G`, `J_λ = ∂G/∂λ` and the interaction matrix `L_G` at the samples.
     pub fn compute(
         &mut self,
-        frame: &Frame,
+        picture: &impl AnyImage,
         lambda: f32,
         jacobian: PgmJacobian,
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute(frame)?;
+        self.brightness.compute(picture)?;
         if let Some(f) = self.filters(lambda) {
             self.recursive_g_j(&f, true);
             match jacobian {

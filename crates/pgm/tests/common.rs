@@ -3,9 +3,10 @@
 
 use std::sync::OnceLock;
 
+use frame::Frame;
 use glam::DVec3;
 use splat::city::{City, CityParams, camera_looking_down};
-use splat::{Frame, RenderOptions, Renderer};
+use splat::{RenderOptions, Renderer};
 pub use test_support::workspace_root as root;
 use ucm::Isometry3;
 

@@ -1,9 +1,9 @@
 //! The transform against the brute-force sum of eq. (1), J_λ against a central
 //! difference in λ, options and errors.
 
+use frame::{Frame, PixelStatus};
 use pgm::{Pgm, PgmError, PgmJacobian, PgmOptions};
 use proptest::prelude::*;
-use splat::{Frame, PixelStatus};
 use ucm::{Camera, Intrinsics, Mask, ValidRegion};
 
 fn small_camera(mask: Vec<bool>) -> Camera {

@@ -7,8 +7,9 @@
 
 mod common;
 
+use frame::{Frame, PixelStatus};
 use splat::city::{City, CityParams};
-use splat::{Frame, PixelStatus, RenderOptions, Renderer};
+use splat::{RenderOptions, Renderer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

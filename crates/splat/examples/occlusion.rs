@@ -5,8 +5,9 @@
 
 mod common;
 
+use frame::Frame;
 use splat::city::{City, CityParams};
-use splat::{Frame, RenderOptions, Renderer};
+use splat::{RenderOptions, Renderer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let city = City::generate(&CityParams::default())?;

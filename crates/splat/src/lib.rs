@@ -4,13 +4,11 @@
 pub mod city;
 mod cloud;
 mod error;
-mod frame;
 pub mod las_io;
 mod render;
 pub mod rng;
 
 pub use cloud::{Cell, DEFAULT_CELL_SIZE_M, MAX_OFFSET_M, PointCloud, luminance};
 pub use error::SplatError;
-pub use frame::{Frame, PixelStatus};
 pub use las_io::{LasInfo, check_las_path, read_las, write_las};
 pub use render::{RenderOptions, RenderStats, Renderer};

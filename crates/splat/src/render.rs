@@ -53,7 +53,9 @@ use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use ucm::{Camera, Isometry3};
 
-use crate::{Frame, PixelStatus, PointCloud, SplatError};
+use frame::{Frame, PixelStatus};
+
+use crate::{PointCloud, SplatError};
 
 /// Renderer settings.
 #[derive(Clone, Copy, Debug, PartialEq)]

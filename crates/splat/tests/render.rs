@@ -1,8 +1,9 @@
 //! The renderer on scenes of known geometry, determinism, and the city.
 
+use frame::{Frame, PixelStatus};
 use glam::DVec3;
 use splat::city::{City, CityParams, camera_looking_down};
-use splat::{Frame, PixelStatus, PointCloud, RenderOptions, Renderer, SplatError};
+use splat::{PointCloud, RenderOptions, Renderer, SplatError};
 use ucm::Isometry3;
 
 use crate::common::*;
@@ -463,7 +464,7 @@ fn downsampled_frame_averages_blocks() {
     // The wrong coarse camera is an error.
     assert!(matches!(
         frame.downsampled(4, &coarse),
-        Err(SplatError::FrameSize { .. })
+        Err(frame::FrameError::Size { .. })
     ));
 }
 

@@ -34,6 +34,9 @@ pub enum VvsError {
     /// Rendering failed.
     #[error(transparent)]
     Render(#[from] splat::SplatError),
+    /// A picture could not be used (size, pyramid).
+    #[error(transparent)]
+    Frame(#[from] frame::FrameError),
     /// The PGM stage failed.
     #[error(transparent)]
     Pgm(#[from] pgm::PgmError),

@@ -3,9 +3,10 @@
 use std::time::Instant;
 
 use brightness::{Brightness, normal_equations};
+use frame::{AnyImage, Frame};
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
-use splat::{Frame, PointCloud, RenderOptions, Renderer};
+use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 
 use crate::global::{PriorBox, SearchReport};
@@ -208,17 +209,17 @@ impl<'a> Servo<'a> {
     /// Align: estimate the pose at which the cloud looks like `desired`, from
     /// `initial` (`world_from_camera`). Errors only on invalid input; divergence is
     /// reported in the outcome.
-    pub fn run(
+    pub fn run<D: AnyImage + Clone>(
         &mut self,
         method: Method,
-        desired: &Frame,
+        desired: &D,
         initial: Isometry3,
     ) -> Result<Outcome, VvsError> {
         let mut outcomes = self.run_methods(&[method], desired, initial)?;
         Ok(outcomes.pop().expect("one outcome per method"))
     }
 
-    fn check_inputs(&self, desired: &Frame, initial: &Isometry3) -> Result<(), VvsError> {
+    fn check_inputs(&self, desired: &impl AnyImage, initial: &Isometry3) -> Result<(), VvsError> {
         if desired.width() != self.camera.width() || desired.height() != self.camera.height() {
             return Err(VvsError::DesiredSize {
                 got_width: desired.width(),
@@ -237,9 +238,9 @@ impl<'a> Servo<'a> {
     /// cloud looks like `desired`, searched for in the `prior` region around `initial`
     /// (`world_from_camera`) with the settings of [`VvsConfig::global`] (whose own
     /// `prior` is ignored here). [`Method::Global`] is this call with that `prior`.
-    pub fn localize_in_box(
+    pub fn localize_in_box<D: AnyImage + Clone>(
         &mut self,
-        desired: &Frame,
+        desired: &D,
         initial: Isometry3,
         prior: &PriorBox,
     ) -> Result<Outcome, VvsError> {
@@ -427,10 +428,10 @@ impl<'a> Servo<'a> {
     /// each exactly what [`Servo::run`] returns for it. Methods whose step 1 is the same
     /// (Rule1 and Rule2) run it once: step 2 of each starts from the shared result,
     /// and each outcome's `time_s` counts the shared step in full.
-    pub fn run_methods(
+    pub fn run_methods<D: AnyImage + Clone>(
         &mut self,
         methods: &[Method],
-        desired: &Frame,
+        desired: &D,
         initial: Isometry3,
     ) -> Result<Vec<Outcome>, VvsError> {
         if let [Method::Global] = methods {
@@ -520,12 +521,12 @@ impl<'a> Servo<'a> {
 
     /// Run `stages` from the state in `outcome` (pose, iterations so far), stopping at
     /// the first divergence.
-    fn run_stages(
+    fn run_stages<D: AnyImage>(
         &mut self,
         stages: &[Planned],
         budgets: [usize; 2],
-        desired: &Frame,
-        coarse_desired: &[Frame],
+        desired: &D,
+        coarse_desired: &[D],
         mut outcome: Outcome,
     ) -> Result<Outcome, VvsError> {
         for planned in stages {
@@ -565,7 +566,7 @@ impl<'a> Servo<'a> {
         &mut self,
         planned: Planned,
         budget: usize,
-        desired: &Frame,
+        desired: &impl AnyImage,
         pose: &mut Isometry3,
         history: &mut Vec<IterationRecord>,
     ) -> Result<(StopReason, f32, f64, usize), VvsError> {

@@ -1,6 +1,6 @@
 //! Degenerate inputs end with a clear status or a typed error, never a panic.
 
-use splat::{Frame, PixelStatus};
+use frame::{Frame, PixelStatus};
 use ucm::Isometry3;
 use vvs::{Divergence, Method, Servo, StopReason, VvsConfig, VvsError};
 

@@ -129,7 +129,7 @@ fn global_settings_are_validated() {
 }
 
 /// An optimiser with `config` (history off) and the desired image of the tests.
-fn servo_with(config: VvsConfig) -> (Servo<'static>, splat::Frame) {
+fn servo_with(config: VvsConfig) -> (Servo<'static>, frame::Frame) {
     let config = VvsConfig {
         keep_history: false,
         ..config

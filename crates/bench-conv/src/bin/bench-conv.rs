@@ -5,8 +5,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use frame::Frame;
 use splat::city::{City, CityParams};
-use splat::{Frame, RenderOptions, Renderer};
+use splat::{RenderOptions, Renderer};
 
 #[derive(Parser)]
 #[command(version, about = "Tools of the PGM omnidirectional VVS project")]
@@ -257,12 +258,13 @@ fn main() -> anyhow::Result<()> {
                 outer_radius_px: outer,
             });
             let camera = probe.with_region(region)?;
-            let frame = bench_conv::real_image::load_grey_frame(&image, [x, y, w, h], &camera)?;
+            let picture = frame::Image::load(&image, &camera, Some([x, y, w, h]))?;
             let lambdas: Vec<f32> = lambdas
                 .split(',')
                 .map(|s| s.trim().parse::<f32>().with_context(|| format!("λ `{s}`")))
                 .collect::<anyhow::Result<_>>()?;
-            for path in bench_conv::real_image::write_pgm_images(&frame, &camera, &lambdas, &out)? {
+            for path in bench_conv::real_image::write_pgm_images(&picture, &camera, &lambdas, &out)?
+            {
                 println!("wrote {}", path.display());
             }
         }

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::SplatError;
+use crate::{AnyImage, FrameError};
 
 /// What a pixel of a frame holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -18,7 +18,8 @@ pub enum PixelStatus {
     Masked,
 }
 
-/// A rendered (or acquired) image with its per-pixel range and status, row-major.
+/// A rendered image with its per-pixel range and status, row-major (a measured picture,
+/// whose ranges are unknown, is an [`crate::Image`]).
 ///
 /// Not `PartialEq`: masked pixels hold NaN ranges; compare with
 /// [`Frame::bitwise_eq`].
@@ -88,24 +89,13 @@ impl Frame {
     /// whose intensity and range are the means over the block's hits. The pixel is a
     /// hit when at least half of the block's valid pixels are hits, masked when
     /// `camera_coarse` masks it, and sky otherwise. `camera_coarse` must have the
-    /// coarse size ([`SplatError::FrameSize`] otherwise).
+    /// coarse size ([`FrameError::Size`] otherwise).
     pub fn downsampled(
         &self,
         factor: u32,
         camera_coarse: &ucm::Camera,
-    ) -> Result<Frame, SplatError> {
-        let (width, height) = (
-            self.width.checked_div(factor).unwrap_or(0),
-            self.height.checked_div(factor).unwrap_or(0),
-        );
-        if width != camera_coarse.width() || height != camera_coarse.height() {
-            return Err(SplatError::FrameSize {
-                frame_width: width,
-                frame_height: height,
-                width: camera_coarse.width(),
-                height: camera_coarse.height(),
-            });
-        }
+    ) -> Result<Frame, FrameError> {
+        let (width, height) = crate::downsampled_size(self, factor, camera_coarse)?;
         let mut out = Frame::new(width, height);
         let (w, k) = (self.width as usize, factor as usize);
         let valid = camera_coarse.valid_pixels();
@@ -178,9 +168,9 @@ impl Frame {
     }
 
     /// Write `1/ρ` of every pixel into `out` (0 for sky and masked pixels).
-    pub fn inverse_range(&self, out: &mut [f32]) -> Result<(), SplatError> {
+    pub fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
         if out.len() != self.range_m.len() {
-            return Err(SplatError::AttributeLength {
+            return Err(FrameError::Length {
                 what: "inverse range buffer",
                 got: out.len(),
                 expected: self.range_m.len(),
@@ -193,7 +183,7 @@ impl Frame {
     }
 
     /// Save the intensity as an 8-bit grey PNG; masked pixels are drawn black.
-    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), SplatError> {
+    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), FrameError> {
         let path = path.as_ref();
         let image = image::GrayImage::from_fn(self.width, self.height, |i, j| {
             let k = (j * self.width + i) as usize;
@@ -203,9 +193,36 @@ impl Frame {
             };
             image::Luma([(v.clamp(0.0, 1.0) * 255.0).round() as u8])
         });
-        image.save(path).map_err(|source| SplatError::Image {
+        image.save(path).map_err(|source| FrameError::Image {
             path: path.to_owned(),
             source,
         })
+    }
+}
+
+impl AnyImage for Frame {
+    fn width(&self) -> u32 {
+        self.width
+    }
+
+    fn height(&self) -> u32 {
+        self.height
+    }
+
+    fn intensity(&self) -> &[f32] {
+        &self.intensity
+    }
+
+    #[inline]
+    fn is_observed(&self, index: usize) -> bool {
+        self.status[index] != PixelStatus::Masked
+    }
+
+    fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
+        Frame::inverse_range(self, out)
+    }
+
+    fn downsampled(&self, factor: u32, camera_coarse: &ucm::Camera) -> Result<Self, FrameError> {
+        Frame::downsampled(self, factor, camera_coarse)
     }
 }

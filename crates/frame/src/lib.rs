@@ -1,0 +1,76 @@
+#![doc = include_str!("../README.md")]
+#![deny(missing_docs)]
+
+mod error;
+mod frame;
+mod image;
+
+pub use error::FrameError;
+pub use frame::{Frame, PixelStatus};
+pub use image::Image;
+
+/// What a feature reads from a picture, measured ([`Image`]) or rendered ([`Frame`]):
+/// its size, its intensities, which pixels hold one, and the inverse range where it is
+/// known.
+pub trait AnyImage {
+    /// Width, pixels.
+    fn width(&self) -> u32;
+
+    /// Height, pixels.
+    fn height(&self) -> u32;
+
+    /// Intensity of every pixel, row-major (meaningless where not observed).
+    fn intensity(&self) -> &[f32];
+
+    /// Whether pixel `index` (row-major) holds an intensity.
+    fn is_observed(&self, index: usize) -> bool;
+
+    /// Write `1/ρ` of every pixel into `out` (ρ the range in metres; 0 where it is
+    /// unknown, infinite or the pixel is not observed). `out` must have one value per
+    /// pixel ([`FrameError::Length`] otherwise).
+    fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError>;
+
+    /// The picture at `1/factor` of its resolution, of the size of `camera_coarse`
+    /// ([`ucm::Camera::downsampled`]; [`FrameError::Size`] otherwise), for image
+    /// pyramids.
+    fn downsampled(&self, factor: u32, camera_coarse: &ucm::Camera) -> Result<Self, FrameError>
+    where
+        Self: Sized;
+
+    /// [`FrameError::Size`] unless the picture has `camera`'s size.
+    fn check_size(&self, what: &'static str, camera: &ucm::Camera) -> Result<(), FrameError> {
+        if self.width() == camera.width() && self.height() == camera.height() {
+            Ok(())
+        } else {
+            Err(FrameError::Size {
+                what,
+                got_width: self.width(),
+                got_height: self.height(),
+                width: camera.width(),
+                height: camera.height(),
+            })
+        }
+    }
+}
+
+/// The size of `picture` downsampled by `factor`, checked against `camera_coarse`.
+fn downsampled_size(
+    picture: &impl AnyImage,
+    factor: u32,
+    camera_coarse: &ucm::Camera,
+) -> Result<(u32, u32), FrameError> {
+    let (width, height) = (
+        picture.width().checked_div(factor).unwrap_or(0),
+        picture.height().checked_div(factor).unwrap_or(0),
+    );
+    if width != camera_coarse.width() || height != camera_coarse.height() {
+        return Err(FrameError::Size {
+            what: "downsampled picture",
+            got_width: width,
+            got_height: height,
+            width: camera_coarse.width(),
+            height: camera_coarse.height(),
+        });
+    }
+    Ok((width, height))
+}

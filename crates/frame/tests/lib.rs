@@ -1,0 +1,3 @@
+//! Integration tests of `frame`, one binary.
+
+mod pictures;
