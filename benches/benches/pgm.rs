@@ -10,9 +10,9 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use frame::Frame;
 use glam::DVec3;
 use pgm::{Pgm, PgmJacobian, PgmOptions};
-use splat::city::{City, CityParams, camera_looking_down};
 use splat::{RenderOptions, Renderer};
 use std::hint::black_box;
+use world::city::{City, CityParams, camera_looking_down};
 
 /// Eq. (1) literally: for each sample, the window sum over `|d| ≤ 4λ`.
 fn reference_pgm(image: &[f32], width: usize, height: usize, lambda: f32, out: &mut [f32]) {

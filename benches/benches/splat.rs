@@ -6,8 +6,8 @@ use benches::fixture_camera;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use frame::Frame;
 use glam::DVec3;
-use splat::city::{City, CityParams, camera_looking_down};
 use splat::{RenderOptions, Renderer};
+use world::city::{City, CityParams, camera_looking_down};
 
 fn render(c: &mut Criterion) {
     let mut group = c.benchmark_group("splat");

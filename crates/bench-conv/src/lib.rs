@@ -26,7 +26,6 @@ pub mod protocol;
 pub mod real_image;
 pub mod report;
 pub mod run;
-pub mod sequence;
 pub mod tracking;
 
 use std::path::{Path, PathBuf};
@@ -112,7 +111,7 @@ pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Res
                 [x, y, z, heading].iter().all(|v| v.is_finite()),
                 "--looking-down {l}: every value must be finite"
             );
-            Ok(splat::city::camera_looking_down(
+            Ok(world::city::camera_looking_down(
                 DVec3::new(x, y, z),
                 heading.to_radians(),
             ))

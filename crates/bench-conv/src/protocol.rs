@@ -157,7 +157,7 @@ pub enum Scene {
 impl Scene {
     /// Generate the city or read the LAS/LAZ file (a relative path is resolved against
     /// `base_dir`); returns the cloud and a short name of the scene. `sampling_seed`
-    /// resamples the city's surfaces ([`splat::city::CityParams::sampling_seed`]).
+    /// resamples the city's surfaces ([`world::city::CityParams::sampling_seed`]).
     pub fn load(
         &self,
         base_dir: &Path,
@@ -171,8 +171,8 @@ impl Scene {
                 clutter,
                 facade_detail,
             } => {
-                let defaults = splat::city::CityParams::default();
-                let city = splat::city::City::generate(&splat::city::CityParams {
+                let defaults = world::city::CityParams::default();
+                let city = world::city::City::generate(&world::city::CityParams {
                     seed: *seed,
                     spacing_m: *spacing_m,
                     sampling_seed,
@@ -406,7 +406,7 @@ impl Protocol {
             (Some(l), None) if !l.iter().all(|v| v.is_finite()) => {
                 bail!("looking_down {l:?} is not finite")
             }
-            (Some([x, y, z, heading]), None) => Ok(splat::city::camera_looking_down(
+            (Some([x, y, z, heading]), None) => Ok(world::city::camera_looking_down(
                 glam::DVec3::new(x, y, z),
                 heading.to_radians(),
             )),

@@ -31,17 +31,19 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use std::ops::ControlFlow;
+
 use anyhow::{Context, bail, ensure};
-use frame::Frame;
+use frame::{Frame, Image};
 use rayon::prelude::*;
 use serde::Deserialize;
 use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
-use vvs::{Method, Servo, StopReason, VvsConfig};
+use vvs::{Method, Servo, Tracker, VvsConfig};
 
 use crate::progress::Progress;
 use crate::protocol::Scene;
-use crate::sequence::{Acquisition, Trajectory};
+use world::sequence::{Acquisition, Trajectory};
 
 /// A parsed sequence file.
 #[derive(Clone, Debug, Deserialize)]
@@ -155,7 +157,7 @@ impl SequenceSpec {
 }
 
 /// The acquired images of every frame in `needed` (others left empty), rendered at
-/// the true poses and degraded.
+/// the true poses and degraded ([`Acquisition::acquire`]).
 pub fn acquire(
     cloud: &PointCloud,
     camera: &Camera,
@@ -163,7 +165,7 @@ pub fn acquire(
     trajectory: &Trajectory,
     acquisition: &Acquisition,
     needed: &[bool],
-) -> anyhow::Result<Vec<Option<Frame>>> {
+) -> anyhow::Result<Vec<Option<Image>>> {
     let mut renderer = Renderer::new(camera.clone(), RenderOptions::default())?;
     let mut frames = Vec::with_capacity(poses.len());
     for (k, pose) in poses.iter().enumerate() {
@@ -176,8 +178,12 @@ pub fn acquire(
         if stats.pixels_hit == 0 {
             bail!("frame {k}: the camera sees no point of the cloud at its true pose");
         }
-        acquisition.degrade(&mut frame, camera, k, trajectory.time_s(k));
-        frames.push(Some(frame));
+        frames.push(Some(acquisition.acquire(
+            &frame,
+            camera,
+            k,
+            trajectory.time_s(k),
+        )));
     }
     Ok(frames)
 }
@@ -209,26 +215,23 @@ pub struct FrameRecord {
     pub wall_time_s: f64,
 }
 
-/// Track one method with one frame step: returns the records of the frames aligned
-/// (the last one is where the track was lost, if it was) and whether it was lost.
+/// Track one method with one frame step ([`vvs::Tracker`]): returns the records of the
+/// frames aligned (the last one is where the track was lost, if it was) and whether it
+/// was lost (diverged, or farther than `lost_threshold_m` from the truth).
 pub fn track(
-    servo: &mut Servo<'_>,
+    servo: Servo<'_>,
     method: Method,
     step: usize,
     spec: &SequenceSpec,
     truth: &[Isometry3],
-    acquired: &[Option<Frame>],
+    acquired: &[Option<Image>],
 ) -> anyhow::Result<(Vec<FrameRecord>, bool)> {
-    let mut estimate = truth[0] * Isometry3::from_pose_vector(spec.initial_offset)?;
+    let initial = truth[0] * Isometry3::from_pose_vector(spec.initial_offset)?;
+    let mut tracker = Tracker::new(servo, method, initial)?;
     let mut records = Vec::new();
-    for k in (0..truth.len()).step_by(step) {
-        let desired = acquired[k]
-            .as_ref()
-            .with_context(|| format!("frame {k} was not acquired"))?;
-        let started = Instant::now();
-        let outcome = servo.run(method, desired, estimate)?;
-        let wall_time_s = started.elapsed().as_secs_f64();
-        estimate = outcome.world_from_camera;
+    let report = tracker.track(acquired.iter().map(Option::as_ref), step, |tracked| {
+        let k = tracked.frame;
+        let estimate = tracked.outcome.world_from_camera;
         let (dt, dr) = estimate.distance_to(&truth[k]);
         records.push(FrameRecord {
             method: method.name().to_string(),
@@ -239,15 +242,17 @@ pub fn track(
             estimated_pose: estimate.to_pose_vector(),
             position_error_m: dt,
             rotation_error_deg: dr.to_degrees(),
-            iterations: outcome.iterations,
-            stop: outcome.stop.name().to_string(),
-            wall_time_s,
+            iterations: tracked.outcome.iterations,
+            stop: tracked.outcome.stop.name().to_string(),
+            wall_time_s: tracked.wall_time_s,
         });
-        if dt > spec.lost_threshold_m || matches!(outcome.stop, StopReason::Diverged(_)) {
-            return Ok((records, true));
+        if dt > spec.lost_threshold_m {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
         }
-    }
-    Ok((records, false))
+    })?;
+    Ok((records, report.lost))
 }
 
 /// Everything a tracking experiment produced.
@@ -303,7 +308,7 @@ pub fn run_sequence(
     camera: &Camera,
     cloud: &PointCloud,
     acquired_cloud: Option<&PointCloud>,
-) -> anyhow::Result<(TrackingResults, Vec<Option<Frame>>)> {
+) -> anyhow::Result<(TrackingResults, Vec<Option<Image>>)> {
     let started = Instant::now();
     let truth = spec.trajectory.poses();
     let mut needed = vec![false; truth.len()];
@@ -340,8 +345,8 @@ pub fn run_sequence(
     let outputs: Vec<anyhow::Result<(Vec<FrameRecord>, bool)>> = jobs
         .par_iter()
         .map(|&(method, n)| {
-            let mut servo = Servo::new(cloud, camera, config.clone())?;
-            let (records, lost) = track(&mut servo, method, n, spec, &truth, &acquired)?;
+            let servo = Servo::new(cloud, camera, config.clone())?;
+            let (records, lost) = track(servo, method, n, spec, &truth, &acquired)?;
             bar.inc(truth.len().div_ceil(n) as u64, "");
             Ok((records, lost))
         })
@@ -655,7 +660,7 @@ fn draw_errors<DB: plotters::prelude::DrawingBackend>(
 /// The superimposition of an acquired image (red) and the image rendered at the
 /// estimated pose (green and blue), as the paper's Fig. 4d–e: where they agree the
 /// picture is grey, where they differ colour fringes appear. Masked pixels are black.
-pub fn write_overlay(acquired: &Frame, rendered: &Frame, path: &Path) -> anyhow::Result<()> {
+pub fn write_overlay(acquired: &Image, rendered: &Frame, path: &Path) -> anyhow::Result<()> {
     ensure!(
         acquired.width() == rendered.width() && acquired.height() == rendered.height(),
         "overlay of images of different sizes"
@@ -684,7 +689,7 @@ pub fn write_results(
     camera: &Camera,
     cloud: &PointCloud,
     results: &TrackingResults,
-    acquired: &[Option<Frame>],
+    acquired: &[Option<Image>],
     out: &Path,
 ) -> anyhow::Result<String> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

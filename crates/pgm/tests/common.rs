@@ -5,10 +5,10 @@ use std::sync::OnceLock;
 
 use frame::Frame;
 use glam::DVec3;
-use splat::city::{City, CityParams, camera_looking_down};
 use splat::{RenderOptions, Renderer};
 pub use test_support::workspace_root as root;
 use ucm::Isometry3;
+use world::city::{City, CityParams, camera_looking_down};
 
 pub fn fixture(name: &str) -> ucm::Camera {
     ucm::Camera::load_toml(root().join("fixtures").join(name)).unwrap()

@@ -8,8 +8,8 @@
 mod common;
 
 use frame::{Frame, PixelStatus};
-use splat::city::{City, CityParams};
 use splat::{RenderOptions, Renderer};
+use world::city::{City, CityParams};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

@@ -6,8 +6,8 @@
 mod common;
 
 use frame::Frame;
-use splat::city::{City, CityParams};
 use splat::{RenderOptions, Renderer};
+use world::city::{City, CityParams};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let city = City::generate(&CityParams::default())?;

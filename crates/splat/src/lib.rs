@@ -1,7 +1,6 @@
 #![doc = include_str!("../README.md")]
 #![deny(missing_docs)]
 
-pub mod city;
 mod cloud;
 mod error;
 pub mod las_io;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 pub use test_support::{data_dir, workspace_root as root};
 
-use splat::city::{City, CityParams};
+use world::city::{City, CityParams};
 
 /// A fixture camera by file name.
 pub fn fixture(name: &str) -> ucm::Camera {

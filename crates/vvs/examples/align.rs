@@ -4,9 +4,9 @@
 //! paper; camera: a file of fixtures/, default omni-320x240.toml).
 
 use glam::DVec3;
-use splat::city::{City, CityParams, camera_looking_down};
 use ucm::Isometry3;
 use vvs::{JacobianKind, Method, Servo, VvsConfig};
+use world::city::{City, CityParams, camera_looking_down};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -5,9 +5,9 @@
 
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
-use splat::city::{City, CityParams, camera_looking_down};
 use ucm::Isometry3;
 use vvs::{Servo, VvsConfig};
+use world::city::{City, CityParams, camera_looking_down};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -31,6 +31,12 @@ pub enum VvsError {
     /// The initial pose is not finite.
     #[error("initial pose is not finite")]
     NonFinitePose,
+    /// [`crate::Tracker::align`] after the track was lost.
+    #[error("the track is lost: an alignment diverged")]
+    TrackLost,
+    /// [`crate::Tracker::track`] reached a frame it must use but was not given.
+    #[error("frame {0} of the sequence is to be tracked but was not given")]
+    MissingFrame(usize),
     /// Rendering failed.
     #[error(transparent)]
     Render(#[from] splat::SplatError),

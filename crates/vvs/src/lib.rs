@@ -7,9 +7,11 @@ pub mod global;
 mod outcome;
 mod servo;
 pub mod solve;
+pub mod track;
 
 pub use config::{JacobianKind, Method, Robust, VvsConfig};
 pub use error::VvsError;
 pub use global::{GlobalConfig, PriorBox, SearchReport};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use servo::Servo;
+pub use track::{TrackReport, TrackedFrame, Tracker};

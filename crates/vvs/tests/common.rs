@@ -2,8 +2,8 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use splat::city::{City, CityParams, camera_looking_down};
 use ucm::Isometry3;
+use world::city::{City, CityParams, camera_looking_down};
 
 pub fn fixture() -> ucm::Camera {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");

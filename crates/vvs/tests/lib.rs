@@ -7,3 +7,4 @@ mod config;
 mod convergence;
 mod degenerate;
 mod global;
+mod track;

@@ -6,8 +6,8 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use frame::Frame;
-use splat::city::{City, CityParams};
 use splat::{RenderOptions, Renderer};
+use world::city::{City, CityParams};
 
 #[derive(Parser)]
 #[command(version, about = "Tools of the PGM omnidirectional VVS project")]

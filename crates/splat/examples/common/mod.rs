@@ -1,7 +1,7 @@
 //! What the examples share.
 
 use glam::DVec3;
-use splat::city::camera_looking_down;
+use world::city::camera_looking_down;
 
 /// Street views of the synthetic city, `(x, y, height, heading_rad)` of a camera
 /// looking down: along the X street, low and high, near the crossing, in the Y street.

@@ -30,11 +30,22 @@
 //! clamping to `[0, 1]`. Every random draw is seeded: the same file gives the same
 //! images.
 
-use frame::{Frame, PixelStatus};
+use frame::{Frame, Image};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use splat::rng::SplitMix64;
 use ucm::{Camera, Isometry3, ValidRegion};
+
+use crate::WorldError;
+
+/// `Err(WorldError::Sequence(…))` unless `condition` holds.
+macro_rules! ensure {
+    ($condition:expr, $($message:tt)+) => {
+        if !$condition {
+            return Err(WorldError::Sequence(format!($($message)+)));
+        }
+    };
+}
 
 /// Most frames a sequence may have: every frame is rendered and kept (about 70 KB
 /// at 320×240, per tracking configuration), so 10 000 frames take about 0.7 GB each.
@@ -72,7 +83,7 @@ impl Default for Trajectory {
         Self {
             frames: 210,
             fps: 30.0,
-            start: [-20.0, -4.75, splat::city::KERB_HEIGHT_M],
+            start: [-20.0, -4.75, crate::city::KERB_HEIGHT_M],
             heading_deg: 90.0,
             length_m: 4.35,
             camera_height_m: 1.2,
@@ -117,7 +128,7 @@ impl Default for Shake {
             bump_length_m: 0.08,
             // The default start is 1.25 m from the road's edge (|y| = 3.5 m).
             kerb_at_m: Some(1.25),
-            kerb_drop_m: splat::city::KERB_HEIGHT_M,
+            kerb_drop_m: crate::city::KERB_HEIGHT_M,
             kerb_pitch_deg: 6.0,
             lateral_m: 0.05,
         }
@@ -163,39 +174,39 @@ impl Default for Acquisition {
 
 impl Trajectory {
     /// Check every field.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<(), WorldError> {
         let finite = |v: f64| v.is_finite();
-        anyhow::ensure!(
+        ensure!(
             (1..=MAX_FRAMES).contains(&self.frames),
             "trajectory.frames must be in 1..={MAX_FRAMES}, got {}",
             self.frames
         );
-        anyhow::ensure!(
+        ensure!(
             self.fps > 0.0 && finite(self.fps),
             "trajectory.fps must be > 0"
         );
-        anyhow::ensure!(
+        ensure!(
             self.start.iter().all(|v| finite(*v))
                 && finite(self.heading_deg)
                 && self.length_m >= 0.0
                 && finite(self.length_m),
             "trajectory.start, heading_deg and length_m must be finite (length >= 0)"
         );
-        anyhow::ensure!(
+        ensure!(
             self.length_m <= MAX_LENGTH_M,
             "trajectory.length_m must be at most {MAX_LENGTH_M} m, got {}",
             self.length_m
         );
-        anyhow::ensure!(
+        ensure!(
             self.camera_height_m > 0.0 && finite(self.camera_height_m),
             "trajectory.camera_height_m must be > 0"
         );
-        anyhow::ensure!(
+        ensure!(
             (0.0..1.0).contains(&self.speed_variation),
             "trajectory.speed_variation must be in [0, 1)"
         );
         let s = &self.shake;
-        anyhow::ensure!(
+        ensure!(
             s.sway_deg
                 .iter()
                 .chain(&s.sway_hz)
@@ -211,7 +222,7 @@ impl Trajectory {
                 && finite(s.bump_length_m),
             "trajectory.shake values must be finite and >= 0 (bump_length_m > 0)"
         );
-        anyhow::ensure!(
+        ensure!(
             s.bumps_per_m * self.length_m <= 1e6,
             "trajectory: {} bumps per metre over {} m is more than a million bumps",
             s.bumps_per_m,
@@ -292,7 +303,7 @@ impl Trajectory {
                     + forward * d
                     + left * lateral
                     + DVec3::Z * (ground + self.camera_height_m);
-                let base = splat::city::camera_looking_down(position, heading);
+                let base = crate::city::camera_looking_down(position, heading);
                 // Camera X is forward: roll about X, pitch about Y (with the ground's
                 // slope and the kerb), yaw about Z.
                 let pitch = sway(1) + slope.atan() + kerb_pitch;
@@ -307,7 +318,7 @@ impl Trajectory {
 
 impl Acquisition {
     /// Check every field.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<(), WorldError> {
         let values = [
             self.vignetting,
             self.gain_amplitude,
@@ -315,31 +326,33 @@ impl Acquisition {
             self.blur_sigma_px,
             self.noise_sigma,
         ];
-        anyhow::ensure!(
+        ensure!(
             values.iter().all(|v| *v >= 0.0 && v.is_finite()),
             "acquisition values must be finite and >= 0"
         );
-        anyhow::ensure!(
+        ensure!(
             self.vignetting < 1.0 && self.gain_amplitude < 1.0,
             "acquisition.vignetting and gain_amplitude must be < 1"
         );
-        anyhow::ensure!(
+        ensure!(
             self.gain_period_s > 0.0 && self.gain_period_s.is_finite(),
             "acquisition.gain_period_s must be > 0"
         );
-        anyhow::ensure!(
+        ensure!(
             self.blur_sigma_px <= 5.0,
             "acquisition.blur_sigma_px must be <= 5"
         );
         Ok(())
     }
 
-    /// Degrade a rendered frame into an "acquired" one, for frame `index` at time
-    /// `time_s`. Every pixel of the camera's valid region becomes a measurement (the
-    /// sky included, as a real camera sees it).
-    pub fn degrade(&self, frame: &mut Frame, camera: &Camera, index: usize, time_s: f64) {
-        let (w, h) = (frame.width() as usize, frame.height() as usize);
+    /// The picture a camera would acquire where `rendered` was rendered, for frame
+    /// `index` at time `time_s`: every pixel of the camera's valid region is a
+    /// measurement (the sky included, as a real camera sees it), degraded as the module
+    /// documentation says.
+    pub fn acquire(&self, rendered: &Frame, camera: &Camera, index: usize, time_s: f64) -> Image {
+        let (w, h) = (rendered.width() as usize, rendered.height() as usize);
         let valid = camera.valid_pixels();
+        let mut intensity = rendered.intensity.clone();
         let (centre, radius) = match camera.region() {
             ValidRegion::Annulus(a) => (a.center_px, a.outer_radius_px),
             _ => {
@@ -358,33 +371,35 @@ impl Acquisition {
                 }
                 let r2 = ((x as f64 - centre[0]).powi(2) + (y as f64 - centre[1]).powi(2))
                     / (radius * radius);
-                let v = f64::from(frame.intensity[i]) * (1.0 - self.vignetting * r2.min(1.0));
-                frame.intensity[i] = (gain * v + offset) as f32;
+                let v = f64::from(intensity[i]) * (1.0 - self.vignetting * r2.min(1.0));
+                intensity[i] = (gain * v + offset) as f32;
             }
         }
         if self.blur_sigma_px > 0.0 {
-            blur(frame, valid, self.blur_sigma_px);
+            intensity = blur(&intensity, w, h, valid, self.blur_sigma_px);
         }
         let mut rng = SplitMix64::new(
             splat::rng::mix64(self.noise_seed) ^ (index as u64).wrapping_mul(0x9E37_79B9),
         );
         for i in 0..w * h {
             if valid[i] {
-                let noisy = f64::from(frame.intensity[i]) + self.noise_sigma * rng.normal();
-                frame.intensity[i] = noisy.clamp(0.0, 1.0) as f32;
-                if frame.status[i] == PixelStatus::Sky {
-                    frame.status[i] = PixelStatus::Hit;
-                    frame.range_m[i] = f32::INFINITY;
-                }
+                let noisy = f64::from(intensity[i]) + self.noise_sigma * rng.normal();
+                intensity[i] = noisy.clamp(0.0, 1.0) as f32;
             }
         }
+        Image::from_parts(
+            rendered.width(),
+            rendered.height(),
+            intensity,
+            valid.to_vec(),
+        )
+        .expect("a frame of the camera's size")
     }
 }
 
 /// Separable Gaussian blur of the valid pixels (normalised over the valid
 /// neighbours, so the mask's edge does not darken).
-fn blur(frame: &mut Frame, valid: &[bool], sigma: f64) {
-    let (w, h) = (frame.width() as usize, frame.height() as usize);
+fn blur(intensity: &[f32], w: usize, h: usize, valid: &[bool], sigma: f64) -> Vec<f32> {
     let radius = (3.0 * sigma).ceil() as isize;
     let kernel: Vec<f64> = (-radius..=radius)
         .map(|d| (-(d * d) as f64 / (2.0 * sigma * sigma)).exp())
@@ -419,6 +434,6 @@ fn blur(frame: &mut Frame, valid: &[bool], sigma: f64) {
         }
         out
     };
-    let rows = pass(&frame.intensity, true);
-    frame.intensity = pass(&rows, false);
+    let rows = pass(intensity, true);
+    pass(&rows, false)
 }

@@ -35,8 +35,10 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 use ucm::Isometry3;
 
-use crate::rng::{SplitMix64, hash3};
-use crate::{PointCloud, SplatError};
+use splat::PointCloud;
+use splat::rng::{SplitMix64, hash3};
+
+use crate::WorldError;
 pub use texture::{ImageTexture, Textures, fbm, value_noise};
 
 /// Smallest point spacing of the city, metres (37 million points with the default
@@ -131,14 +133,14 @@ pub fn camera_looking_down(position: DVec3, heading_rad: f64) -> Isometry3 {
 
 impl City {
     /// Generate the city. Errors on invalid parameters or unreadable textures.
-    pub fn generate(params: &CityParams) -> Result<Self, SplatError> {
+    pub fn generate(params: &CityParams) -> Result<Self, WorldError> {
         let started = Instant::now();
         let p = params;
         let check = |name: &'static str, ok: bool, value: f64, range: String| {
             if ok {
                 Ok(())
             } else {
-                Err(SplatError::Parameter {
+                Err(WorldError::Parameter {
                     name,
                     message: format!("{value} is outside {range}"),
                 })
@@ -174,7 +176,7 @@ impl City {
         )?;
         let estimate = estimated_points(p);
         if estimate > MAX_POINTS as f64 {
-            return Err(SplatError::Parameter {
+            return Err(WorldError::Parameter {
                 name: "spacing_m",
                 message: format!(
                     "a city of {} m arms sampled every {} m would hold about {:.0} million \
@@ -203,7 +205,7 @@ impl City {
         if p.clutter {
             g.clutter();
         }
-        let intensities: Vec<f32> = g.colors.iter().map(|&c| crate::luminance(c)).collect();
+        let intensities: Vec<f32> = g.colors.iter().map(|&c| splat::luminance(c)).collect();
         let cloud = PointCloud::from_points(
             DVec3::ZERO,
             &g.positions,
@@ -307,7 +309,7 @@ impl Generator {
     }
 
     fn seed(&self, label: u64) -> u64 {
-        crate::rng::mix64(self.params.seed ^ label.wrapping_mul(0x2545_F491_4F6C_DD1D))
+        splat::rng::mix64(self.params.seed ^ label.wrapping_mul(0x2545_F491_4F6C_DD1D))
     }
 
     // ----------------------------------------------------------------- ground
@@ -354,7 +356,7 @@ impl Generator {
         let slab = [self.rng.uniform(0.3, 0.5), self.rng.uniform(0.3, 0.6)];
         // Every layout draw of the shared stream is above: from here on it only samples.
         if let Some(sampling) = p.sampling_seed {
-            self.rng = SplitMix64::new(crate::rng::mix64(sampling ^ 0x5A4D_504C_494E_4721));
+            self.rng = SplitMix64::new(splat::rng::mix64(sampling ^ 0x5A4D_504C_494E_4721));
         }
         let gravel = self.textures.gravel.clone();
 

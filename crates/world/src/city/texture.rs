@@ -2,8 +2,8 @@
 
 use std::path::Path;
 
-use crate::SplatError;
-use crate::rng::hash3;
+use crate::WorldError;
+use splat::rng::hash3;
 
 /// Smooth value noise in `[0, 1]` at `(x, y)` (unit lattice), seeded.
 pub fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
@@ -48,9 +48,9 @@ pub struct ImageTexture {
 
 impl ImageTexture {
     /// Read a PNG (converted to grey levels) that tiles over `size_m` metres.
-    pub fn load(path: &Path, size_m: f64) -> Result<Self, SplatError> {
+    pub fn load(path: &Path, size_m: f64) -> Result<Self, WorldError> {
         let image = image::open(path)
-            .map_err(|source| SplatError::Image {
+            .map_err(|source| WorldError::Texture {
                 path: path.to_owned(),
                 source,
             })?
@@ -90,14 +90,14 @@ pub struct Textures {
 impl Textures {
     /// Read `brick.png`, `gravel.png` and `grass.png` from a folder, each if present.
     /// The folder itself must exist.
-    pub fn from_dir(dir: &Path) -> Result<Self, SplatError> {
+    pub fn from_dir(dir: &Path) -> Result<Self, WorldError> {
         if !dir.is_dir() {
-            return Err(SplatError::Io {
+            return Err(WorldError::Io {
                 path: dir.to_owned(),
                 source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a folder"),
             });
         }
-        let load = |name: &str, size_m: f64| -> Result<Option<ImageTexture>, SplatError> {
+        let load = |name: &str, size_m: f64| -> Result<Option<ImageTexture>, WorldError> {
             let path = dir.join(name);
             if path.exists() {
                 ImageTexture::load(&path, size_m).map(Some)

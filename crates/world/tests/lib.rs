@@ -1,0 +1,4 @@
+//! Integration tests of `world`, one binary.
+
+mod city;
+mod sequence;
