@@ -16,7 +16,7 @@
 //! * `bench-conv pgm-image --image IMG --mei-yaml CALIB --crop x,y,w,h --out DIR`: the
 //!   PGM of a real catadioptric image at several λ (the paper's Fig. 1);
 //! * `bench-conv track SEQUENCE.toml --out DIR`: generate a shaken sequence with
-//!   acquired-looking images ([`sequence`]) and track it by successive alignments
+//!   acquired-looking images ([`world::sequence`]) and track it by successive alignments
 //!   ([`tracking`], the paper's §4): `frames.csv`, `summary.md`, trajectory and error
 //!   plots, and the superimpositions of the paper's Fig. 4d–e.
 #![deny(missing_docs)]

@@ -95,12 +95,7 @@ impl Image {
             source,
         };
         let io = |e| error(::image::ImageError::IoError(e));
-        let (picture_width, picture_height) = ImageReader::open(path)
-            .map_err(io)?
-            .with_guessed_format()
-            .map_err(io)?
-            .into_dimensions()
-            .map_err(error)?;
+        let (picture_width, picture_height) = Self::dimensions(path)?;
         let pixels = u64::from(picture_width) * u64::from(picture_height);
         if pixels > ucm::MAX_PIXELS {
             return Err(FrameError::TooManyPixels {
@@ -141,6 +136,22 @@ impl Image {
             .crop_imm(x, y, width, height);
         let intensity = luminance(decoded);
         Self::from_parts(width, height, intensity, camera.valid_pixels().to_vec())
+    }
+
+    /// The width and height of a picture file, read from its header alone.
+    pub fn dimensions(path: impl AsRef<Path>) -> Result<(u32, u32), FrameError> {
+        let path = path.as_ref();
+        let error = |source| FrameError::Image {
+            path: path.to_owned(),
+            source,
+        };
+        let io = |e| error(::image::ImageError::IoError(e));
+        ImageReader::open(path)
+            .map_err(io)?
+            .with_guessed_format()
+            .map_err(io)?
+            .into_dimensions()
+            .map_err(error)
     }
 
     /// Width, pixels.

@@ -41,6 +41,28 @@ impl Method {
     }
 }
 
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = VvsError;
+
+    /// A method by its [`Method::name`], any case (`povs`, `Rule2`, `global`, …).
+    fn from_str(text: &str) -> Result<Self, VvsError> {
+        Method::ALL
+            .into_iter()
+            .chain([Method::Global])
+            .find(|m| m.name().eq_ignore_ascii_case(text.trim()))
+            .ok_or_else(|| VvsError::Config {
+                name: "method",
+                message: format!("unknown method `{text}` (povs, rule0, rule1, rule2, global)"),
+            })
+    }
+}
+
 /// Which PGM interaction matrix the optimiser uses.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "kind")]

@@ -40,6 +40,9 @@ pub enum VvsError {
     /// Rendering failed.
     #[error(transparent)]
     Render(#[from] splat::SplatError),
+    /// A camera file could not be read or describes no valid camera.
+    #[error(transparent)]
+    Camera(#[from] ucm::UcmError),
     /// A picture could not be used (size, pyramid).
     #[error(transparent)]
     Frame(#[from] frame::FrameError),

@@ -4,6 +4,7 @@
 mod config;
 mod error;
 pub mod global;
+pub mod localize;
 mod outcome;
 mod servo;
 pub mod solve;
@@ -12,6 +13,7 @@ pub mod track;
 pub use config::{JacobianKind, Method, Robust, VvsConfig};
 pub use error::VvsError;
 pub use global::{GlobalConfig, PriorBox, SearchReport};
+pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use servo::Servo;
 pub use track::{TrackReport, TrackedFrame, Tracker};

@@ -7,4 +7,5 @@ mod config;
 mod convergence;
 mod degenerate;
 mod global;
+mod localize;
 mod track;

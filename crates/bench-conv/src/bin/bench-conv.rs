@@ -112,6 +112,12 @@ enum Command {
         /// Draw every point (no level of detail).
         #[arg(long)]
         no_lod: bool,
+        /// Write what a real camera would measure instead of the rendering: the
+        /// acquisition simulator with its default settings (world::Acquisition:
+        /// vignetting, gain and offset drift, blur, noise), and, for the synthetic city,
+        /// another point sampling of its surfaces.
+        #[arg(long)]
+        acquire: bool,
     },
 }
 
@@ -352,6 +358,7 @@ fn main() -> anyhow::Result<()> {
             looking_down,
             out,
             no_lod,
+            acquire,
         } => {
             let world_from_camera =
                 bench_conv::parse_pose(pose.as_deref(), looking_down.as_deref())?;
@@ -371,6 +378,8 @@ fn main() -> anyhow::Result<()> {
                 None => {
                     let city = City::generate(&CityParams {
                         seed: city_seed,
+                        sampling_seed: acquire
+                            .then_some(world::Acquisition::default().sampling_seed),
                         ..CityParams::default()
                     })?;
                     println!(
@@ -402,7 +411,13 @@ fn main() -> anyhow::Result<()> {
                 stats.cells_drawn,
                 elapsed.as_secs_f64() * 1e3
             );
-            frame.save_png(&out)?;
+            if acquire {
+                world::Acquisition::default()
+                    .acquire(&frame, &camera, 0, 0.0)
+                    .save_png(&out)?;
+            } else {
+                frame.save_png(&out)?;
+            }
             println!("wrote {}", out.display());
         }
     }

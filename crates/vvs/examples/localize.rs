@@ -1,0 +1,152 @@
+//! Localise a picture in a cloud, from files: the library call a user copies
+//! ([`vvs::Localizer::localize_files`]).
+//!
+//! ```text
+//! cargo run --release -p vvs --example localize -- \
+//!     --picture image.png --camera camera.toml --cloud city.laz \
+//!     --initial tx,ty,tz,θwx,θwy,θwz [--prior 8,2,1.5,10,10,15] [--method rule2] \
+//!     [--crop x,y,w,h] [--mei-yaml calib.yml --annulus inner,outer] [--truth tx,…]
+//! ```
+//!
+//! Poses are the paper's `r = (t, θw)` of `world_from_camera` (metres, radians). With
+//! `--prior` (the box's ±X,±Y,±Z metres and ±θwX,±θwY,±θwZ degrees, in the camera's
+//! frame) the global search of `vvs::global` runs inside that box around `--initial`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Parser;
+use ucm::Isometry3;
+use vvs::{CameraFile, LocalizeFiles, Localizer, Method, PriorBox};
+
+#[derive(Parser, Debug)]
+#[command(about = "Localise a picture in a LAS/LAZ cloud by PGM virtual visual servoing")]
+struct Args {
+    /// The picture (PNG or JPEG, grey or colour, 8 or 16 bits).
+    #[arg(long)]
+    picture: PathBuf,
+    /// Camera TOML file (or give --mei-yaml).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Mei calibration (omniunwarp YAML) instead of --camera.
+    #[arg(long)]
+    mei_yaml: Option<PathBuf>,
+    /// With --mei-yaml: inner,outer radius of the mirror's annulus (pixels).
+    #[arg(long)]
+    annulus: Option<String>,
+    /// The calibrated part of the picture: x,y,width,height (pixels).
+    #[arg(long)]
+    crop: Option<String>,
+    /// The cloud (LAS or LAZ).
+    #[arg(long)]
+    cloud: PathBuf,
+    /// Initial world_from_camera, tx,ty,tz,θwx,θwy,θwz (m, rad).
+    #[arg(long, allow_hyphen_values = true)]
+    initial: String,
+    /// Prior box for the global search: X,Y,Z (m), θwX,θwY,θwZ (degrees).
+    #[arg(long)]
+    prior: Option<String>,
+    /// Local method without a prior box (povs, rule0, rule1, rule2).
+    #[arg(long, default_value = "rule2")]
+    method: Method,
+    /// The true pose, if known, to print the error.
+    #[arg(long, allow_hyphen_values = true)]
+    truth: Option<String>,
+}
+
+fn numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|s| {
+            s.trim()
+                .parse::<f64>()
+                .with_context(|| format!("`{s}` is not a number"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    values.try_into().map_err(|v: Vec<f64>| {
+        anyhow::anyhow!("expected {N} comma-separated numbers, got {}", v.len())
+    })
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let camera = match (args.camera, args.mei_yaml) {
+        (Some(path), None) => CameraFile::Toml(path),
+        (None, Some(path)) => CameraFile::MeiYaml {
+            path,
+            annulus_radii_px: args.annulus.as_deref().map(numbers::<2>).transpose()?,
+        },
+        _ => bail!("give exactly one of --camera and --mei-yaml"),
+    };
+    let crop = match args.crop.as_deref() {
+        Some(text) => {
+            let v = numbers::<4>(text)?;
+            anyhow::ensure!(
+                v.iter()
+                    .all(|x| x.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(x)),
+                "--crop takes four pixel counts"
+            );
+            Some(v.map(|x| x as u32))
+        }
+        None => None,
+    };
+    let files = LocalizeFiles {
+        picture: args.picture,
+        crop,
+        camera,
+        cloud: args.cloud,
+    };
+    let initial = Isometry3::from_pose_vector(numbers::<6>(&args.initial)?)?;
+    let localizer = Localizer {
+        method: args.method,
+        prior: match args.prior.as_deref() {
+            Some(text) => {
+                let [x, y, z, a, b, c] = numbers::<6>(text)?;
+                Some(PriorBox {
+                    translation_m: [x, y, z],
+                    rotation_deg: [a, b, c],
+                })
+            }
+            None => None,
+        },
+        ..Localizer::default()
+    };
+    let localized = localizer.localize_files(&files, initial)?;
+    let o = &localized.outcome;
+    println!(
+        "read {} points and {} valid pixels in {:.1} s",
+        localized.cloud_points, localized.valid_pixels, localized.load_time_s
+    );
+    let method = if localizer.prior.is_some() {
+        Method::Global
+    } else {
+        localizer.method
+    };
+    println!(
+        "{method}: {:?} after {:?} iterations in {:.1} s, cost {:.3e}",
+        o.stop, o.iterations, o.time_s, o.cost
+    );
+    if let Some(search) = &o.search {
+        println!(
+            "search: {} candidates, {} descents, {} refinements",
+            search.candidates, search.descents, search.refinements
+        );
+    }
+    let r = o.world_from_camera.to_pose_vector();
+    println!(
+        "world_from_camera (t, θw): {:.4},{:.4},{:.4},{:.5},{:.5},{:.5}",
+        r[0], r[1], r[2], r[3], r[4], r[5]
+    );
+    if let Some(text) = args.truth.as_deref() {
+        let truth = Isometry3::from_pose_vector(numbers::<6>(text)?)?;
+        let (dt, dr) = o.world_from_camera.distance_to(&truth);
+        let (t0, r0) = initial.distance_to(&truth);
+        println!(
+            "error: {:.4} m, {:.3}° (initial {t0:.2} m, {:.1}°)",
+            dt,
+            dr.to_degrees(),
+            r0.to_degrees()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,180 @@
+//! [`Localizer`]: localise a measured picture in a cloud, from files a user has.
+//!
+//! The paper's §4 aligns pictures of a real catadioptric camera with renderings of a
+//! Lidar cloud. This is that call: a picture (PNG or JPEG, 8 or 16 bits, colour becomes
+//! luminance), its camera (a camera TOML file, or a Mei calibration in the YAML of
+//! `omniunwarp` with the picture's size and an annulus), a LAS/LAZ cloud, an initial
+//! pose, and optionally the prior box of the global search ([`crate::global`]). The
+//! brightness of the picture and of the renderings is centred and normalised (§4), so
+//! that the exposure of the camera and the colours of the cloud need not agree.
+//!
+//! ```no_run
+//! use vvs::localize::{CameraFile, LocalizeFiles, Localizer};
+//!
+//! let files = LocalizeFiles {
+//!     picture: "image.png".into(),
+//!     crop: None,
+//!     camera: CameraFile::Toml("camera.toml".into()),
+//!     cloud: "city.laz".into(),
+//! };
+//! let initial = ucm::Isometry3::from_pose_vector([-18.0, 1.0, 3.2, 3.14159, 0.0, 0.1])?;
+//! let localized = Localizer::default().localize_files(&files, initial)?;
+//! println!("{:?}: {:?}", localized.outcome.stop, localized.outcome.world_from_camera);
+//! # Ok::<(), vvs::VvsError>(())
+//! ```
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use frame::{AnyImage, Image};
+use splat::PointCloud;
+use ucm::{Camera, Isometry3};
+
+use crate::{Method, Outcome, PriorBox, Servo, VvsConfig, VvsError};
+
+/// Where the camera's calibration comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CameraFile {
+    /// A camera TOML file (`ucm::Camera::load_toml`), of the picture's (cropped) size.
+    Toml(PathBuf),
+    /// A Mei calibration in the YAML layout of `omniunwarp` (`ucm::Camera::load_mei_yaml`):
+    /// the camera takes the (cropped) picture's size; its valid region is the annulus of
+    /// these radii around the principal point, or the whole picture.
+    MeiYaml {
+        /// The YAML file.
+        path: PathBuf,
+        /// Inner and outer radius of the mirror's annulus, pixels (`None`: every pixel).
+        annulus_radii_px: Option<[f64; 2]>,
+    },
+}
+
+/// The files of a localisation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LocalizeFiles {
+    /// The picture (PNG or JPEG).
+    pub picture: PathBuf,
+    /// The calibrated part of the picture, `[x, y, width, height]` pixels (`None`: all).
+    pub crop: Option<[u32; 4]>,
+    /// The camera.
+    pub camera: CameraFile,
+    /// The cloud (LAS or LAZ).
+    pub cloud: PathBuf,
+}
+
+/// A localisation and what it used.
+#[derive(Clone, Debug)]
+pub struct Localized {
+    /// The optimiser's outcome: final `world_from_camera`, cost, stop reason, iterations
+    /// (and the search's report for a global localisation).
+    pub outcome: Outcome,
+    /// The camera as read.
+    pub camera: Camera,
+    /// Points of the cloud.
+    pub cloud_points: usize,
+    /// Valid pixels of the picture.
+    pub valid_pixels: usize,
+    /// Time spent reading the files, seconds.
+    pub load_time_s: f64,
+}
+
+/// How to localise: the optimiser's settings, the method, and an optional prior box.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Localizer {
+    /// The optimiser's settings. [`Localizer::default`] is the paper's, with the
+    /// brightness normalised (§4) and no per-iteration history.
+    pub config: VvsConfig,
+    /// The local method run without a prior box (default: Rule2).
+    pub method: Method,
+    /// With a prior box, the global search of [`crate::global`] inside it around the
+    /// initial pose (then `method` is ignored; the search refines with
+    /// `config.global.refine_method`).
+    pub prior: Option<PriorBox>,
+}
+
+impl Default for Localizer {
+    fn default() -> Self {
+        Self {
+            config: VvsConfig {
+                normalize: true,
+                keep_history: false,
+                ..VvsConfig::default()
+            },
+            method: Method::Rule2,
+            prior: None,
+        }
+    }
+}
+
+impl Localizer {
+    /// Localise `picture`, taken by `camera`, in `cloud` from `initial`
+    /// (`world_from_camera`). Divergence is an outcome, not an error.
+    pub fn localize<D: AnyImage + Clone>(
+        &self,
+        cloud: &PointCloud,
+        camera: &Camera,
+        picture: &D,
+        initial: Isometry3,
+    ) -> Result<Outcome, VvsError> {
+        let mut servo = Servo::new(cloud, camera, self.config.clone())?;
+        match &self.prior {
+            Some(prior) => servo.localize_in_box(picture, initial, prior),
+            None if self.method == Method::Global => {
+                servo.localize_in_box(picture, initial, &self.config.global.prior)
+            }
+            None => servo.run(self.method, picture, initial),
+        }
+    }
+
+    /// Read the files and localise the picture from `initial`.
+    pub fn localize_files(
+        &self,
+        files: &LocalizeFiles,
+        initial: Isometry3,
+    ) -> Result<Localized, VvsError> {
+        if !initial.is_finite() {
+            return Err(VvsError::NonFinitePose);
+        }
+        let started = Instant::now();
+        let camera = load_camera(files)?;
+        let picture = Image::load(&files.picture, &camera, files.crop)?;
+        let (cloud, _) = splat::read_las(&files.cloud)?;
+        let load_time_s = started.elapsed().as_secs_f64();
+        let outcome = self.localize(&cloud, &camera, &picture, initial)?;
+        Ok(Localized {
+            outcome,
+            valid_pixels: picture.valid_count(),
+            cloud_points: cloud.len(),
+            camera,
+            load_time_s,
+        })
+    }
+}
+
+/// The camera of `files`, of the (cropped) picture's size.
+fn load_camera(files: &LocalizeFiles) -> Result<Camera, VvsError> {
+    match &files.camera {
+        CameraFile::Toml(path) => Ok(Camera::load_toml(path)?),
+        CameraFile::MeiYaml {
+            path,
+            annulus_radii_px,
+        } => {
+            let (width, height) = match files.crop {
+                Some([_, _, w, h]) => (w, h),
+                None => Image::dimensions(&files.picture)?,
+            };
+            let camera = Camera::load_mei_yaml(path, width, height, ucm::ValidRegion::Full)?;
+            match annulus_radii_px {
+                None => Ok(camera),
+                Some([inner, outer]) => {
+                    let i = camera.intrinsics();
+                    let region = ucm::ValidRegion::Annulus(ucm::Annulus {
+                        center_px: [i.u0, i.v0],
+                        inner_radius_px: *inner,
+                        outer_radius_px: *outer,
+                    });
+                    Ok(camera.with_region(region)?)
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,144 @@
+//! Localising a measured picture from files: a city written as LAZ, a picture rendered
+//! elsewhere in another sampling, degraded like an acquisition and saved as PNG.
+
+use std::path::PathBuf;
+
+use glam::DVec3;
+use ucm::Isometry3;
+use vvs::{CameraFile, LocalizeFiles, Localizer, Method, PriorBox, StopReason, VvsError};
+use world::{Acquisition, City, CityParams, camera_looking_down};
+
+use crate::common::fixture;
+
+fn temp_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vvs-localize-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+#[test]
+fn localizes_a_png_in_a_laz_cloud_from_metres_away() {
+    let dir = temp_dir();
+    let params = CityParams {
+        arm_length_m: 30.0,
+        ..CityParams::default()
+    };
+    let city = City::generate(&params).unwrap();
+    let cloud_path = dir.join("city.laz");
+    splat::write_las(&city.cloud, &cloud_path).unwrap();
+    // The picture: another sampling of the same surfaces, degraded, 16 bits.
+    let resampled = City::generate(&CityParams {
+        sampling_seed: Some(Acquisition::default().sampling_seed),
+        ..params
+    })
+    .unwrap();
+    let camera = fixture();
+    let truth = camera_looking_down(DVec3::new(-12.0, 0.5, 3.0), 0.0);
+    let mut servo = vvs::Servo::new(&resampled.cloud, &camera, Default::default()).unwrap();
+    let rendered = servo.render(&truth).unwrap();
+    let picture = Acquisition::default().acquire(&rendered, &camera, 0, 0.0);
+    let picture_path = dir.join("picture.png");
+    picture.save_png16(&picture_path).unwrap();
+    let camera_path = root().join("fixtures/omni-320x240.toml");
+    let files = LocalizeFiles {
+        picture: picture_path.clone(),
+        crop: None,
+        camera: CameraFile::Toml(camera_path.clone()),
+        cloud: cloud_path.clone(),
+    };
+
+    // Rule2 from 1.5 m and 5° away.
+    let start = truth * Isometry3::from_pose_vector([1.5, -0.5, 0.2, 0.0, 0.0, 0.09]).unwrap();
+    let localized = Localizer::default().localize_files(&files, start).unwrap();
+    let (dt, dr) = localized.outcome.world_from_camera.distance_to(&truth);
+    eprintln!(
+        "rule2: {:?} {:?}: {dt:.4} m, {:.3}°",
+        localized.outcome.stop,
+        localized.outcome.iterations,
+        dr.to_degrees()
+    );
+    assert!(dt < 0.05 && dr.to_degrees() < 0.5, "{dt} m");
+    assert_eq!(localized.cloud_points, city.cloud.len());
+    assert_eq!(localized.valid_pixels, camera.valid_pixel_count());
+
+    // The global search inside the paper's box, from its corner (6 m along the street).
+    let corner = truth * Isometry3::from_pose_vector([6.0, 1.5, 0.5, 0.0, 0.0, 0.15]).unwrap();
+    let localizer = Localizer {
+        prior: Some(PriorBox::default()),
+        ..Localizer::default()
+    };
+    let localized = localizer.localize_files(&files, corner).unwrap();
+    let (dt, _) = localized.outcome.world_from_camera.distance_to(&truth);
+    eprintln!("global: {:?}: {dt:.4} m", localized.outcome.stop);
+    assert!(dt < 0.05, "{dt} m");
+    assert!(localized.outcome.search.is_some());
+    assert!(!matches!(localized.outcome.stop, StopReason::Diverged(_)));
+
+    // Typed errors: a missing picture, a camera of another size, a missing cloud, a
+    // NaN pose, a mask radius that makes no region.
+    let err = |files: &LocalizeFiles, start: Isometry3| {
+        Localizer::default()
+            .localize_files(files, start)
+            .unwrap_err()
+    };
+    let missing = LocalizeFiles {
+        picture: dir.join("none.png"),
+        ..files.clone()
+    };
+    assert!(matches!(err(&missing, start), VvsError::Frame(_)));
+    let other_size = LocalizeFiles {
+        camera: CameraFile::Toml(root().join("fixtures/omni-640x480.toml")),
+        ..files.clone()
+    };
+    assert!(matches!(err(&other_size, start), VvsError::Frame(_)));
+    let no_cloud = LocalizeFiles {
+        cloud: dir.join("none.laz"),
+        ..files.clone()
+    };
+    assert!(matches!(err(&no_cloud, start), VvsError::Render(_)));
+    let nan = Isometry3::from_translation(DVec3::new(f64::NAN, 0.0, 0.0));
+    assert!(matches!(err(&files, nan), VvsError::NonFinitePose));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A Mei calibration gives the camera of the cropped real picture (the cloud is then
+/// the missing piece); `Method` parses from its name.
+#[test]
+fn reads_a_mei_calibration_and_a_cropped_real_picture() {
+    let Some(data) = test_support::data_dir() else {
+        return;
+    };
+    let files = LocalizeFiles {
+        picture: data.join("catadioptric/omniunwarp-example.jpg"),
+        crop: Some([310, 80, 1230, 1000]),
+        camera: CameraFile::MeiYaml {
+            path: data.join("catadioptric/omniunwarp-mei.yaml"),
+            annulus_radii_px: Some([30.0, 470.0]),
+        },
+        cloud: temp_dir().join("absent.laz"),
+    };
+    let start = Isometry3::IDENTITY;
+    match Localizer::default().localize_files(&files, start) {
+        Err(VvsError::Render(e)) => eprintln!("{e}"),
+        other => panic!("expected the cloud's error, got {other:?}"),
+    }
+    let bad_annulus = LocalizeFiles {
+        camera: CameraFile::MeiYaml {
+            path: data.join("catadioptric/omniunwarp-mei.yaml"),
+            annulus_radii_px: Some([470.0, 30.0]),
+        },
+        ..files.clone()
+    };
+    assert!(matches!(
+        Localizer::default().localize_files(&bad_annulus, start),
+        Err(VvsError::Camera(_))
+    ));
+    assert_eq!("Rule2".parse::<Method>().unwrap(), Method::Rule2);
+    assert_eq!(" global ".parse::<Method>().unwrap(), Method::Global);
+    assert_eq!(Method::Povs.to_string(), "povs");
+    assert!("rule3".parse::<Method>().is_err());
+}
