@@ -57,7 +57,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use serde::Deserialize;
 use ucm::Isometry3;
-use vvs::{JacobianKind, Method, PriorBox, VvsConfig};
+use vvs::{Method, PgmJacobian, PriorBox, VvsConfig};
 
 /// A parsed protocol file.
 #[derive(Clone, Debug, Deserialize)]
@@ -73,7 +73,7 @@ pub struct Protocol {
     /// Methods to run.
     pub methods: Vec<Method>,
     /// PGM Jacobians to run every PGM method with.
-    pub jacobians: Vec<JacobianName>,
+    pub jacobians: Vec<PgmJacobian>,
     /// Optional subset of the 64 initial poses.
     #[serde(default)]
     pub initial_indices: Option<Vec<usize>>,
@@ -99,31 +99,6 @@ pub struct Protocol {
 
 fn default_threshold() -> f64 {
     0.02
-}
-
-/// A Jacobian by name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum JacobianName {
-    /// [`JacobianKind::Convolved`].
-    Convolved,
-    /// [`JacobianKind::Paper`] without margin.
-    Paper,
-    /// [`JacobianKind::Paper`] dropping samples within 3λ of the mask's edge.
-    PaperMargin3,
-}
-
-impl JacobianName {
-    /// The optimiser's setting.
-    pub fn kind(self) -> JacobianKind {
-        match self {
-            JacobianName::Convolved => JacobianKind::Convolved,
-            JacobianName::Paper => JacobianKind::Paper { edge_margin: None },
-            JacobianName::PaperMargin3 => JacobianKind::Paper {
-                edge_margin: Some(3.0),
-            },
-        }
-    }
 }
 
 /// The cloud of a protocol.
@@ -279,14 +254,14 @@ pub struct Variant {
     pub method: Method,
     /// Jacobian (PGM methods).
     #[serde(default = "default_jacobian")]
-    pub jacobian: JacobianName,
+    pub jacobian: PgmJacobian,
     /// Settings overriding the protocol's `[vvs]`.
     #[serde(default)]
     pub vvs: toml::Table,
 }
 
-fn default_jacobian() -> JacobianName {
-    JacobianName::Convolved
+fn default_jacobian() -> PgmJacobian {
+    PgmJacobian::Convolved
 }
 
 /// One method configuration of a protocol: what a row of the summary is about.
@@ -454,7 +429,9 @@ impl Protocol {
 
     /// The method configurations, in order (paper methods, then variants if `extras`).
     pub fn method_configs(&self, extras: bool) -> anyhow::Result<Vec<MethodConfig>> {
-        let base = merge_config(&VvsConfig::default(), &self.vvs).context("[vvs]")?;
+        let base = VvsConfig::default()
+            .with_overrides(&self.vvs)
+            .context("[vvs]")?;
         let mut out = Vec::new();
         for &method in &self.methods {
             if method == Method::Povs {
@@ -466,14 +443,14 @@ impl Protocol {
             } else {
                 for &j in &self.jacobians {
                     let mut config = VvsConfig {
-                        jacobian: j.kind(),
+                        jacobian: j,
                         ..base.clone()
                     };
                     if method == Method::Global {
                         config.global.prior = self.prior_box();
                     }
                     out.push(MethodConfig {
-                        name: format!("{}/{}", method.name(), j.kind().name()),
+                        name: format!("{}/{}", method.name(), j.name()),
                         method,
                         config,
                     });
@@ -482,9 +459,10 @@ impl Protocol {
         }
         if extras {
             for v in &self.variant {
-                let mut config =
-                    merge_config(&base, &v.vvs).with_context(|| format!("variant {}", v.name))?;
-                config.jacobian = v.jacobian.kind();
+                let mut config = base
+                    .with_overrides(&v.vvs)
+                    .with_context(|| format!("variant {}", v.name))?;
+                config.jacobian = v.jacobian;
                 if v.method == Method::Global {
                     config.global.prior = self.prior_box();
                 }
@@ -526,13 +504,4 @@ impl Protocol {
         }
         Ok(runs)
     }
-}
-
-/// `base` with the fields of `overrides` replaced, validated.
-fn merge_config(base: &VvsConfig, overrides: &toml::Table) -> anyhow::Result<VvsConfig> {
-    let mut table: toml::Table = toml::from_str(&base.to_toml_string()?)?;
-    for (k, v) in overrides {
-        table.insert(k.clone(), v.clone());
-    }
-    Ok(VvsConfig::from_toml_str(&toml::to_string(&table)?)?)
 }

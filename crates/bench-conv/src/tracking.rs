@@ -125,14 +125,13 @@ impl SequenceSpec {
     /// The optimiser configuration: the paper's defaults, brightness normalised (§4),
     /// then the file's `[vvs]` table.
     pub fn vvs_config(&self) -> anyhow::Result<VvsConfig> {
-        let mut table = toml::Table::new();
-        table.insert("normalize".into(), toml::Value::Boolean(true));
-        table.insert("keep_history".into(), toml::Value::Boolean(false));
-        for (k, v) in &self.vvs {
-            table.insert(k.clone(), v.clone());
-        }
-        let text = toml::to_string(&table)?;
-        VvsConfig::from_toml_str(&text).context("the sequence's [vvs] table")
+        let base = VvsConfig {
+            normalize: true,
+            keep_history: false,
+            ..VvsConfig::default()
+        };
+        base.with_overrides(&self.vvs)
+            .context("the sequence's [vvs] table")
     }
 
     /// The camera.

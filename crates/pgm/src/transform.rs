@@ -12,8 +12,11 @@ use crate::recursive::{self, Mode, Recursive, Scratch, Shape};
 /// Supported Gaussian extents, pixels.
 pub const LAMBDA_RANGE: std::ops::RangeInclusive<f32> = 0.5..=40.0;
 
-/// Which interaction matrix `L_G` to compute (`../shared/notes/math.md`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Which interaction matrix `L_G` to compute (`../shared/notes/math.md`): the one
+/// Jacobian setting of the project (the optimiser's, the protocols'). Written by its
+/// [`PgmJacobian::name`] in files (`"convolved"`, `"paper"`, `"paper-margin3"`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub enum PgmJacobian {
     /// The derivative of what is computed on the fixed pixel grid:
     /// `L_G = g_λ ⊛ (mask · L_I)`, six separable convolutions of the per-pixel
@@ -29,6 +32,68 @@ pub enum PgmJacobian {
         /// Drop samples within this many λ of the mask's edge.
         edge_margin: Option<f32>,
     },
+}
+
+impl PgmJacobian {
+    /// Short name: `convolved`, `paper`, or `paper-margin<m>` with a margin of `m` λ.
+    pub fn name(self) -> String {
+        match self {
+            PgmJacobian::Convolved => "convolved".into(),
+            PgmJacobian::Paper { edge_margin: None } => "paper".into(),
+            PgmJacobian::Paper {
+                edge_margin: Some(m),
+            } => format!("paper-margin{m}"),
+        }
+    }
+}
+
+impl std::fmt::Display for PgmJacobian {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
+impl std::str::FromStr for PgmJacobian {
+    type Err = PgmError;
+
+    /// The Jacobian of a [`PgmJacobian::name`] (the margin finite and ≥ 0).
+    fn from_str(text: &str) -> Result<Self, PgmError> {
+        let text = text.trim();
+        let bad = || PgmError::Option {
+            name: "jacobian",
+            message: format!("unknown Jacobian `{text}` (convolved, paper, paper-margin<m>)"),
+        };
+        match text {
+            "convolved" => Ok(PgmJacobian::Convolved),
+            "paper" => Ok(PgmJacobian::Paper { edge_margin: None }),
+            _ => {
+                let margin: f32 = text
+                    .strip_prefix("paper-margin")
+                    .and_then(|m| m.parse().ok())
+                    .ok_or_else(bad)?;
+                if !(margin >= 0.0 && margin.is_finite()) {
+                    return Err(bad());
+                }
+                Ok(PgmJacobian::Paper {
+                    edge_margin: Some(margin),
+                })
+            }
+        }
+    }
+}
+
+impl TryFrom<String> for PgmJacobian {
+    type Error = PgmError;
+
+    fn try_from(text: String) -> Result<Self, PgmError> {
+        text.parse()
+    }
+}
+
+impl From<PgmJacobian> for String {
+    fn from(jacobian: PgmJacobian) -> String {
+        jacobian.name()
+    }
 }
 
 /// Options of the transform.

@@ -327,3 +327,40 @@ fn transform_is_deterministic_across_thread_counts() {
     );
     assert_eq!(results[0].2, results[1].2);
 }
+
+/// A Jacobian is written by its name, and read back (files, protocols, the optimiser's
+/// TOML).
+#[test]
+fn jacobian_names_round_trip() {
+    for jacobian in [
+        PgmJacobian::Convolved,
+        PgmJacobian::Paper { edge_margin: None },
+        PgmJacobian::Paper {
+            edge_margin: Some(3.0),
+        },
+        PgmJacobian::Paper {
+            edge_margin: Some(1.5),
+        },
+    ] {
+        let name = jacobian.to_string();
+        assert_eq!(name.parse::<PgmJacobian>().unwrap(), jacobian, "{name}");
+        assert_eq!(String::from(jacobian), name);
+    }
+    assert_eq!(
+        PgmJacobian::Paper {
+            edge_margin: Some(3.0)
+        }
+        .name(),
+        "paper-margin3"
+    );
+    for bad in [
+        "",
+        "convolve",
+        "paper-margin",
+        "paper-margin-1",
+        "paper-marginNaN",
+        "paper-margininf",
+    ] {
+        assert!(bad.parse::<PgmJacobian>().is_err(), "{bad}");
+    }
+}

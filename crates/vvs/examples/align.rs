@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use ucm::Isometry3;
-use vvs::{JacobianKind, Method, Servo, VvsConfig};
+use vvs::{Method, PgmJacobian, Servo, VvsConfig};
 use world::city::{City, CityParams, camera_looking_down};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -18,8 +18,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let num = |i: usize, d: f64| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let jacobian = match args.get(5).map(String::as_str) {
-        Some("paper") => JacobianKind::Paper { edge_margin: None },
-        _ => JacobianKind::Convolved,
+        Some("paper") => PgmJacobian::Paper { edge_margin: None },
+        _ => PgmJacobian::Convolved,
     };
     let city = City::generate(&CityParams::default())?;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");

@@ -1,6 +1,7 @@
 //! Configuration of the optimiser: plain structs, (de)serialisable as TOML, every field
 //! documented. Defaults are the paper's (§3.1) and `../shared/notes/math.md`'s.
 
+use pgm::PgmJacobian;
 use serde::{Deserialize, Serialize};
 
 use crate::VvsError;
@@ -63,41 +64,6 @@ impl std::str::FromStr for Method {
     }
 }
 
-/// Which PGM interaction matrix the optimiser uses.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "kind")]
-pub enum JacobianKind {
-    /// The derivative of the re-rendered PGM, `g_λ ⊛ (mask · L_I)`.
-    Convolved,
-    /// The paper's eq. (5), optionally dropping samples within `edge_margin` × λ of the
-    /// mask's edge.
-    Paper {
-        /// Margin in units of λ, or none.
-        #[serde(default)]
-        edge_margin: Option<f32>,
-    },
-}
-
-impl JacobianKind {
-    pub(crate) fn to_pgm(self) -> pgm::PgmJacobian {
-        match self {
-            JacobianKind::Convolved => pgm::PgmJacobian::Convolved,
-            JacobianKind::Paper { edge_margin } => pgm::PgmJacobian::Paper { edge_margin },
-        }
-    }
-
-    /// Short name (`convolved`, `paper`, `paper-margin3`, …).
-    pub fn name(self) -> String {
-        match self {
-            JacobianKind::Convolved => "convolved".into(),
-            JacobianKind::Paper { edge_margin: None } => "paper".into(),
-            JacobianKind::Paper {
-                edge_margin: Some(m),
-            } => format!("paper-margin{m}"),
-        }
-    }
-}
-
 /// Robust (M-estimator) weighting of the residuals.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "kind")]
@@ -127,7 +93,7 @@ pub struct VvsConfig {
     /// Total iteration budget (both steps, or PoVS). Paper: 250.
     pub max_iterations: usize,
     /// PGM interaction matrix.
-    pub jacobian: JacobianKind,
+    pub jacobian: PgmJacobian,
     /// A stage has converged when an iteration moves the camera by less than this
     /// (metres)…
     pub converged_translation_m: f64,
@@ -190,7 +156,7 @@ impl Default for VvsConfig {
             rule0_lambda_factor: 2.0,
             step1_max_iterations: 120,
             max_iterations: 250,
-            jacobian: JacobianKind::Convolved,
+            jacobian: PgmJacobian::Convolved,
             converged_translation_m: 2e-5,
             converged_rotation_rad: 2e-5,
             stall_window: 10,
@@ -321,6 +287,37 @@ impl VvsConfig {
     /// are errors) and validate it.
     pub fn from_toml_str(text: &str) -> Result<Self, VvsError> {
         let config: Self = toml::from_str(text).map_err(|e| VvsError::ConfigFile(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// This configuration with the fields of `overrides` (a TOML table of
+    /// [`VvsConfig`] fields, as in a protocol's or a sequence's `[vvs]`) replaced, then
+    /// validated: tables (`global`, `global.prior`) merge key by key, any other value
+    /// replaces the field; fields the table does not name keep this configuration's
+    /// values. The one way the project layers settings.
+    pub fn with_overrides(&self, overrides: &toml::Table) -> Result<VvsConfig, VvsError> {
+        fn merge(base: &mut toml::Table, overrides: &toml::Table) {
+            for (key, value) in overrides {
+                match (base.get_mut(key), value) {
+                    (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+                    _ => {
+                        base.insert(key.clone(), value.clone());
+                    }
+                }
+            }
+        }
+        let mut table =
+            toml::Table::try_from(self).map_err(|e| VvsError::ConfigFile(e.to_string()))?;
+        merge(&mut table, overrides);
+        let mut config: VvsConfig = table
+            .try_into()
+            .map_err(|e: toml::de::Error| VvsError::ConfigFile(e.to_string()))?;
+        // TOML has no `None`: an absent optional field reads as its default, which for
+        // the level of detail is not `None`.
+        if !overrides.contains_key("lod_spacing_px") {
+            config.lod_spacing_px = self.lod_spacing_px;
+        }
         config.validate()?;
         Ok(config)
     }

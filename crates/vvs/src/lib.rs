@@ -10,10 +10,11 @@ mod servo;
 pub mod solve;
 pub mod track;
 
-pub use config::{JacobianKind, Method, Robust, VvsConfig};
+pub use config::{Method, Robust, VvsConfig};
 pub use error::VvsError;
 pub use global::{GlobalConfig, PriorBox, SearchReport};
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
+pub use pgm::PgmJacobian;
 pub use servo::Servo;
 pub use track::{TrackReport, TrackedFrame, Tracker};

@@ -38,6 +38,15 @@ struct Planned {
     last_of_step: bool,
 }
 
+/// How a stage ended: why, with which λ and cost, after how many iterations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct StageResult {
+    stop: StopReason,
+    lambda: f32,
+    cost: f64,
+    iterations: usize,
+}
+
 /// The buffers of one pyramid level (level 0: full resolution).
 #[derive(Debug)]
 struct Level {
@@ -298,16 +307,16 @@ impl<'a> Servo<'a> {
         for &(_, index) in &screened {
             let mut pose = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
             history.clear();
-            let (stop, _, cost, count) = self.run_stage(
+            let result = self.run_stage(
                 planned,
                 settings.descent_iterations,
                 &desired_small,
                 &mut pose,
                 &mut history,
             )?;
-            descent_iterations += count;
-            if !matches!(stop, StopReason::Diverged(_)) && cost.is_finite() {
-                descended.push((cost, index, pose));
+            descent_iterations += result.iterations;
+            if !matches!(result.stop, StopReason::Diverged(_)) && result.cost.is_finite() {
+                descended.push((result.cost, index, pose));
             }
         }
         descended.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -542,26 +551,26 @@ impl<'a> Servo<'a> {
                 0 => desired,
                 k => &coarse_desired[k - 1],
             };
-            let (result, stage_lambda, stage_cost, count) = self.run_stage(
+            let result = self.run_stage(
                 *planned,
                 budget,
                 level_desired,
                 &mut outcome.world_from_camera,
                 &mut outcome.history,
             )?;
-            outcome.iterations[step] += count;
-            outcome.lambda = stage_lambda;
-            outcome.cost = stage_cost;
-            outcome.stop = result;
+            outcome.iterations[step] += result.iterations;
+            outcome.lambda = result.lambda;
+            outcome.cost = result.cost;
+            outcome.stop = result.stop;
             outcome.time_s += started.elapsed().as_secs_f64();
-            if let StopReason::Diverged(_) = result {
+            if let StopReason::Diverged(_) = result.stop {
                 break;
             }
         }
         Ok(outcome)
     }
 
-    /// One stage: returns why it stopped, the final λ and cost, and its iteration count.
+    /// One stage, from `pose` (updated in place).
     fn run_stage(
         &mut self,
         planned: Planned,
@@ -569,7 +578,7 @@ impl<'a> Servo<'a> {
         desired: &impl AnyImage,
         pose: &mut Isometry3,
         history: &mut Vec<IterationRecord>,
-    ) -> Result<(StopReason, f32, f64, usize), VvsError> {
+    ) -> Result<StageResult, VvsError> {
         let Planned {
             stage,
             step: stage_number,
@@ -611,12 +620,12 @@ impl<'a> Servo<'a> {
             let stats = renderer.render(self.cloud, &pose.inverse(), frame)?;
             let hits = stats.pixels_hit as f64;
             if hits / valid_count < self.config.min_hit_fraction {
-                return Ok((
-                    StopReason::Diverged(Divergence::NoValidPixels),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::NoValidPixels),
                     lambda,
                     cost,
-                    iteration,
-                ));
+                    iterations: iteration,
+                });
             }
             // Feature, residuals, rows.
             let (values, pixel_weights): (&[f32], Option<&[f32]>) = match stage {
@@ -625,7 +634,7 @@ impl<'a> Servo<'a> {
                     (brightness.values(), None)
                 }
                 Stage::Pgm { .. } => {
-                    pgm.compute(frame, lambda, self.config.jacobian.to_pgm())?;
+                    pgm.compute(frame, lambda, self.config.jacobian)?;
                     (pgm.values(), Some(pgm.weights()))
                 }
             };
@@ -650,21 +659,21 @@ impl<'a> Servo<'a> {
                 .sum::<f64>()
                 / weight_sum.max(1.0);
             if !cost.is_finite() {
-                return Ok((
-                    StopReason::Diverged(Divergence::NotFinite),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::NotFinite),
                     lambda,
                     cost,
-                    iteration,
-                ));
+                    iterations: iteration,
+                });
             }
             let reference = *initial_cost.get_or_insert(cost);
             if cost > self.config.divergence_cost_factor * reference.max(1e-30) {
-                return Ok((
-                    StopReason::Diverged(Divergence::CostExploded),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::CostExploded),
                     lambda,
                     cost,
-                    iteration,
-                ));
+                    iterations: iteration,
+                });
             }
             self.costs.push(cost);
             if stalled(
@@ -672,7 +681,12 @@ impl<'a> Servo<'a> {
                 self.config.stall_window,
                 self.config.stall_relative_decrease,
             ) {
-                return Ok((StopReason::Stalled, lambda, cost, iteration));
+                return Ok(StageResult {
+                    stop: StopReason::Stalled,
+                    lambda,
+                    cost,
+                    iterations: iteration,
+                });
             }
             // The step: x = −μ J⁺ e.
             let eta = self.config.levenberg_marquardt;
@@ -700,12 +714,12 @@ impl<'a> Servo<'a> {
                 }
             };
             let Some((x, lambda_x)) = step else {
-                return Ok((
-                    StopReason::Diverged(Divergence::SingularSystem),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::SingularSystem),
                     lambda,
                     cost,
-                    iteration,
-                ));
+                    iterations: iteration,
+                });
             };
             let gain = self.config.gain;
             let v = x.map(|c| -gain * c);
@@ -725,12 +739,12 @@ impl<'a> Servo<'a> {
                 });
             }
             let Ok(update) = Isometry3::exp(v) else {
-                return Ok((
-                    StopReason::Diverged(Divergence::NotFinite),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::NotFinite),
                     lambda,
                     cost,
-                    iteration + 1,
-                ));
+                    iterations: iteration + 1,
+                });
             };
             *pose = *pose * update;
             if optimise_lambda {
@@ -738,30 +752,40 @@ impl<'a> Servo<'a> {
                     .clamp(*pgm::LAMBDA_RANGE.start(), *pgm::LAMBDA_RANGE.end());
             }
             if !pose.is_finite() || !lambda.is_finite() {
-                return Ok((
-                    StopReason::Diverged(Divergence::NotFinite),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::NotFinite),
                     lambda,
                     cost,
-                    iteration + 1,
-                ));
+                    iterations: iteration + 1,
+                });
             }
             let position = pose.translation;
             if outside(self.bounds, self.config.bounds_margin_m, position) {
-                return Ok((
-                    StopReason::Diverged(Divergence::LeftBounds),
+                return Ok(StageResult {
+                    stop: StopReason::Diverged(Divergence::LeftBounds),
                     lambda,
                     cost,
-                    iteration + 1,
-                ));
+                    iterations: iteration + 1,
+                });
             }
             if step_t < self.config.converged_translation_m
                 && step_r < self.config.converged_rotation_rad
                 && lambda_dot.abs() < 1e-4
             {
-                return Ok((StopReason::Converged, lambda, cost, iteration + 1));
+                return Ok(StageResult {
+                    stop: StopReason::Converged,
+                    lambda,
+                    cost,
+                    iterations: iteration + 1,
+                });
             }
         }
-        Ok((StopReason::IterationBudget, lambda, cost, budget))
+        Ok(StageResult {
+            stop: StopReason::IterationBudget,
+            lambda,
+            cost,
+            iterations: budget,
+        })
     }
 }
 

@@ -1,9 +1,9 @@
-use vvs::{JacobianKind, Robust, VvsConfig, VvsError};
+use vvs::{PgmJacobian, Robust, VvsConfig, VvsError};
 
 #[test]
 fn config_round_trips_through_toml_and_rejects_bad_values() {
     let config = VvsConfig {
-        jacobian: JacobianKind::Paper {
+        jacobian: PgmJacobian::Paper {
             edge_margin: Some(3.0),
         },
         robust: Some(Robust::Tukey { c: 4.685 }),
@@ -58,4 +58,43 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         VvsConfig::from_toml_str("gian = 0.2"),
         Err(VvsError::ConfigFile(_))
     ));
+}
+
+/// Overrides replace the fields they name, merge tables key by key, keep everything
+/// else (an absent level of detail included), and are validated.
+#[test]
+fn overrides_layer_settings() {
+    let base = VvsConfig {
+        gain: 0.3,
+        lod_spacing_px: None,
+        global: vvs::GlobalConfig {
+            screened: 7,
+            ..vvs::GlobalConfig::default()
+        },
+        ..VvsConfig::default()
+    };
+    let overrides: toml::Table = toml::from_str(
+        "max_iterations = 300\njacobian = \"paper-margin3\"\n[global]\nrefined = 2\n",
+    )
+    .unwrap();
+    let merged = base.with_overrides(&overrides).unwrap();
+    assert_eq!(
+        merged,
+        VvsConfig {
+            max_iterations: 300,
+            jacobian: PgmJacobian::Paper {
+                edge_margin: Some(3.0)
+            },
+            global: vvs::GlobalConfig {
+                refined: 2,
+                ..base.global.clone()
+            },
+            ..base.clone()
+        }
+    );
+    assert_eq!(base.with_overrides(&toml::Table::new()).unwrap(), base);
+    for bad in ["gian = 0.2", "gain = -1.0", "jacobian = \"sobel\""] {
+        let table: toml::Table = toml::from_str(bad).unwrap();
+        assert!(base.with_overrides(&table).is_err(), "{bad}");
+    }
 }

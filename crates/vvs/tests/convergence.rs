@@ -1,6 +1,6 @@
 //! Convergence claims on the synthetic city.
 
-use vvs::{JacobianKind, Method, Servo, StopReason, VvsConfig};
+use vvs::{Method, PgmJacobian, Servo, StopReason, VvsConfig};
 
 use crate::common::*;
 
@@ -122,7 +122,7 @@ fn runs_are_deterministic_across_thread_counts() {
     let config = VvsConfig {
         step1_max_iterations: 5,
         max_iterations: 8,
-        jacobian: JacobianKind::Convolved,
+        jacobian: PgmJacobian::Convolved,
         ..VvsConfig::default()
     };
     let start = offset([0.5, -0.3, 0.1, 0.02, 0.0, 0.1]);
