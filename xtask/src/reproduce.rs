@@ -3,9 +3,7 @@
 
 use std::process::Command;
 
-use anyhow::{Context, bail, ensure};
-use bench_conv::protocol::Protocol;
-use bench_conv::report::{read_csv, summarize};
+use anyhow::{Context, ensure};
 
 use crate::project_root;
 
@@ -71,80 +69,15 @@ pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
         ],
         build,
     )?;
-    check_fig4(&sequence, &out)?;
-    println!(
-        "checked: {} is consistent with {}",
-        out.display(),
-        sequence.display()
-    );
-    Ok(())
-}
-
-/// The result files exist; every track aligned every frame of its step unless it was
-/// lost, and a lost track ends on a frame beyond the threshold or diverged.
-pub fn check_fig4(sequence: &std::path::Path, out: &std::path::Path) -> anyhow::Result<()> {
-    use bench_conv::tracking::{SequenceSpec, display_name, read_csv};
-    let spec = SequenceSpec::load(sequence)?;
-    let mut files = vec![
-        "frames.csv".to_string(),
-        "summary.md".into(),
-        "trajectories.png".into(),
-        "trajectories.svg".into(),
-        "errors.png".into(),
-        "errors.svg".into(),
-    ];
-    let records = read_csv(&out.join("frames.csv"))?;
-    let frames = spec.trajectory.frames;
-    let largest = spec.steps.iter().copied().max().unwrap_or(1);
-    for method in &spec.methods {
-        for &n in &spec.steps {
-            let track: Vec<_> = records
-                .iter()
-                .filter(|r| r.method == method.name() && r.step == n)
-                .collect();
-            let expected: Vec<usize> = (0..frames).step_by(n).collect();
-            let got: Vec<usize> = track.iter().map(|r| r.frame).collect();
-            ensure!(
-                expected.starts_with(&got) && !got.is_empty(),
-                "{} N = {n}: frames {got:?} are not a prefix of {expected:?}",
-                method.name()
-            );
-            if got.len() < expected.len() {
-                let last = track[track.len() - 1];
-                ensure!(
-                    last.position_error_m > spec.lost_threshold_m
-                        || last.stop.starts_with("diverged"),
-                    "{} N = {n} stops early at frame {} without being lost",
-                    method.name(),
-                    last.frame
-                );
-            }
-            if n == largest {
-                files.push(format!(
-                    "overlay-n{n}-{}-frame{}.png",
-                    display_name(method.name()),
-                    got[got.len() - 1]
-                ));
-            }
-        }
-    }
-    ensure_files(out, &files)
-}
-
-/// Every file of `names` exists under `out` and is not empty.
-fn ensure_files<S: AsRef<std::path::Path>>(
-    out: &std::path::Path,
-    names: &[S],
-) -> anyhow::Result<()> {
-    for name in names {
-        let path = out.join(name);
-        ensure!(
-            path.metadata().map(|m| m.len() > 0).unwrap_or(false),
-            "{} is missing or empty",
-            path.display()
-        );
-    }
-    Ok(())
+    bench_conv(
+        &[
+            "check-track".as_ref(),
+            sequence.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ],
+        build,
+    )
 }
 
 /// Run the Fig. 3 protocol (or its quick subset) and check the result files; with
@@ -160,7 +93,7 @@ pub fn fig3(quick: bool, extras: bool, domain: bool, build: Build) -> anyhow::Re
             let protocol_path = root.join("fixtures").join(protocol);
             let out = root.join("results").join(out);
             run_protocol(&protocol_path, &out, false, build)?;
-            check(&protocol_path, &out, false, false)?;
+            check(&protocol_path, &out, false, false, build)?;
         }
     }
     let root = project_root();
@@ -176,7 +109,7 @@ pub fn fig3(quick: bool, extras: bool, domain: bool, build: Build) -> anyhow::Re
         )
     };
     run_protocol(&protocol_path, &out, extras, build)?;
-    check(&protocol_path, &out, quick, extras)
+    check(&protocol_path, &out, quick, extras, build)
 }
 
 /// Run the global localisation protocols (method `global`, beyond the paper): the
@@ -196,7 +129,7 @@ pub fn global(quick: bool, build: Build) -> anyhow::Result<()> {
         let protocol_path = root.join("fixtures").join(protocol);
         let out = root.join("results").join(out);
         run_protocol(&protocol_path, &out, false, build)?;
-        check(&protocol_path, &out, false, false)?;
+        check(&protocol_path, &out, false, false, build)?;
     }
     Ok(())
 }
@@ -220,79 +153,27 @@ fn run_protocol(
     bench_conv(&args, build)
 }
 
-/// The result files exist, every method has one row per (desired, scale, initial)
-/// pose, and in quick mode: PoVS fails from 8 m, Rule2 succeeds at least as often as
-/// Rule0.
-pub fn check(
+/// `bench-conv check PROTOCOL --out OUT [--quick] [--extras]`: the result files exist,
+/// every method has one row per (desired, scale, initial) pose, and in quick mode PoVS
+/// fails from 8 m and Rule2 succeeds at least as often as Rule0.
+fn check(
     protocol_path: &std::path::Path,
     out: &std::path::Path,
     quick: bool,
     extras: bool,
+    build: Build,
 ) -> anyhow::Result<()> {
-    ensure_files(out, &["runs.csv", "summary.md", "cdf.png", "cdf.svg"])?;
-    let protocol = Protocol::load(protocol_path)?;
-    if protocol.offsets.scales.len() > 1 {
-        ensure_files(out, &["domain.csv", "domain.png", "domain.svg"])?;
-    }
-    let records = read_csv(&out.join("runs.csv"))?;
-    let methods = protocol.method_configs(extras)?;
-    let per_method =
-        protocol.desired.len() * protocol.offsets.scales.len() * protocol.initial_indices().len();
-    ensure!(
-        records.len() == per_method * methods.len(),
-        "{} rows, expected {} ({} per method)",
-        records.len(),
-        per_method * methods.len(),
-        per_method
-    );
-    let summaries = summarize(&records);
-    for m in &methods {
-        let s = summaries
-            .iter()
-            .find(|s| s.method == m.name)
-            .with_context(|| format!("no rows for {}", m.name))?;
-        ensure!(
-            s.runs == per_method,
-            "{}: {} rows, expected {per_method}",
-            m.name,
-            s.runs
-        );
-    }
-    for (k, r) in records.iter().enumerate() {
-        ensure!(
-            r.run_id == k,
-            "run ids are not 0..{}: {} at row {k}",
-            records.len(),
-            r.run_id
-        );
-        ensure!(
-            r.success == (r.final_position_error_m < protocol.success_threshold_m),
-            "run {}: success flag inconsistent with its error",
-            r.run_id
-        );
-    }
+    let mut args = vec![
+        "check".as_ref(),
+        protocol_path.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ];
     if quick {
-        let successes = |name: &str| {
-            summaries
-                .iter()
-                .find(|s| s.method == name)
-                .map_or(0, |s| s.successes)
-        };
-        if successes("povs") != 0 {
-            bail!(
-                "PoVS succeeded from 8 m offsets ({} runs): unexpected",
-                successes("povs")
-            );
-        }
-        ensure!(
-            successes("rule2/convolved") >= successes("rule0/convolved"),
-            "Rule2 succeeded less often than Rule0 on the quick subset"
-        );
+        args.push("--quick".as_ref());
     }
-    println!(
-        "checked: {} is consistent with {}",
-        out.display(),
-        protocol_path.display()
-    );
-    Ok(())
+    if extras {
+        args.push("--extras".as_ref());
+    }
+    bench_conv(&args, build)
 }

@@ -18,9 +18,13 @@
 //! * `bench-conv track SEQUENCE.toml --out DIR`: generate a shaken sequence with
 //!   acquired-looking images ([`world::sequence`]) and track it by successive alignments
 //!   ([`tracking`], the paper's §4): `frames.csv`, `summary.md`, trajectory and error
-//!   plots, and the superimpositions of the paper's Fig. 4d–e.
+//!   plots, and the superimpositions of the paper's Fig. 4d–e;
+//! * `bench-conv check PROTOCOL.toml --out DIR [--quick] [--extras]` and
+//!   `bench-conv check-track SEQUENCE.toml --out DIR`: check a results folder against
+//!   the file that made it ([`check`]).
 #![deny(missing_docs)]
 
+pub mod check;
 pub mod progress;
 pub mod protocol;
 pub mod real_image;

@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use vvs::{Method, StopReason};
 
 /// One run's result (a CSV row).
 #[derive(Clone, Debug, PartialEq)]
@@ -20,8 +21,10 @@ pub struct RunRecord {
     pub offset_scale: f64,
     /// Initial pose index (0–63, or 0–11 along the axes).
     pub initial: usize,
-    /// Method configuration name.
-    pub method: String,
+    /// Method configuration name (`rule2/convolved`, `povs`, a variant's name).
+    pub config: String,
+    /// The method it ran.
+    pub method: Method,
     /// Final position error, metres.
     pub final_position_error_m: f64,
     /// Final rotation error, degrees.
@@ -31,7 +34,7 @@ pub struct RunRecord {
     /// Iterations of step 2.
     pub iterations_step2: usize,
     /// Why the run stopped.
-    pub stop: String,
+    pub stop: StopReason,
     /// Final λ.
     pub lambda: f32,
     /// Final cost.
@@ -43,12 +46,13 @@ pub struct RunRecord {
     pub success: bool,
 }
 
-const HEADER: [&str; 15] = [
+const HEADER: [&str; 16] = [
     "run_id",
     "scene",
     "desired",
     "offset_scale",
     "initial",
+    "config",
     "method",
     "final_position_error_m",
     "final_rotation_error_deg",
@@ -272,12 +276,13 @@ pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
             r.desired.to_string(),
             r.offset_scale.to_string(),
             r.initial.to_string(),
-            r.method.clone(),
+            r.config.clone(),
+            r.method.to_string(),
             format!("{:.6e}", r.final_position_error_m),
             format!("{:.6e}", r.final_rotation_error_deg),
             r.iterations_step1.to_string(),
             r.iterations_step2.to_string(),
-            r.stop.clone(),
+            r.stop.to_string(),
             r.lambda.to_string(),
             format!("{:.6e}", r.cost),
             format!("{:.3}", r.wall_time_s),
@@ -340,21 +345,22 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
             desired: parse!(2),
             offset_scale: parse!(3),
             initial: parse!(4),
-            method: field(5).to_string(),
-            final_position_error_m: parse!(6),
-            final_rotation_error_deg: parse!(7),
-            iterations_step1: parse!(8),
-            iterations_step2: parse!(9),
-            stop: field(10).to_string(),
-            lambda: parse!(11),
-            cost: parse!(12),
-            wall_time_s: parse!(13),
-            success: parse!(14),
+            config: field(5).to_string(),
+            method: parse!(6),
+            final_position_error_m: parse!(7),
+            final_rotation_error_deg: parse!(8),
+            iterations_step1: parse!(9),
+            iterations_step2: parse!(10),
+            stop: parse!(11),
+            lambda: parse!(12),
+            cost: parse!(13),
+            wall_time_s: parse!(14),
+            success: parse!(15),
         };
         for (i, value) in [
-            (6, record.final_position_error_m),
-            (7, record.final_rotation_error_deg),
-            (13, record.wall_time_s),
+            (7, record.final_position_error_m),
+            (8, record.final_rotation_error_deg),
+            (14, record.wall_time_s),
         ] {
             if !(value.is_finite() && value >= 0.0) {
                 bail!("{}: {value} is not a finite, non-negative number", ctx(i));
@@ -433,8 +439,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Per-method statistics.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodSummary {
-    /// Method configuration name.
-    pub method: String,
+    /// Method configuration name (`rule2/convolved`, `povs`, a variant's name).
+    pub config: String,
     /// Runs.
     pub runs: usize,
     /// Successful runs.
@@ -455,12 +461,12 @@ pub struct MethodSummary {
 pub fn summarize(records: &[RunRecord]) -> Vec<MethodSummary> {
     let mut groups: BTreeMap<&str, Vec<&RunRecord>> = BTreeMap::new();
     for r in records {
-        groups.entry(&r.method).or_default().push(r);
+        groups.entry(&r.config).or_default().push(r);
     }
     groups
         .into_iter()
         .map(|(m, g)| MethodSummary {
-            method: m.to_string(),
+            config: m.to_string(),
             runs: g.len(),
             successes: g.iter().filter(|r| r.success).count(),
             median_position_error_m: median(g.iter().map(|r| r.final_position_error_m).collect()),
@@ -500,11 +506,11 @@ pub fn summary_markdown(
     s.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
     for m in summarize(records) {
         let paper =
-            paper_success_rate(&m.method).map_or("—".to_string(), |p| format!("{p:.0} %"));
+            paper_success_rate(&m.config).map_or("—".to_string(), |p| format!("{p:.0} %"));
         let _ = writeln!(
             s,
             "| {} | {} | {:.1} % ({}) | {} | {:.4} m | {:.3}° | {:.0} | {:.1} s |",
-            m.method,
+            m.config,
             m.runs,
             100.0 * m.successes as f64 / m.runs.max(1) as f64,
             m.successes,
@@ -577,7 +583,7 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
     for (i, m) in summaries.iter().enumerate() {
         let mut errors: Vec<f64> = records
             .iter()
-            .filter(|r| r.method == m.method)
+            .filter(|r| r.config == m.config)
             .map(|r| r.final_position_error_m.clamp(1e-4, 100.0))
             .collect();
         errors.sort_by(f64::total_cmp);
@@ -592,7 +598,7 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
         // One decimal, so that 3 and 5 successes of 448 (0.7 and 1.1 %) read apart.
         let label = format!(
             "{} ({:.1} %, {}/{})",
-            m.method,
+            m.config,
             100.0 * m.successes as f64 / n.max(1.0),
             m.successes,
             errors.len()
@@ -605,8 +611,8 @@ fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
 /// The success of one method at one offset scale: a point of the domain curve.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DomainPoint {
-    /// Method configuration name.
-    pub method: String,
+    /// Method configuration name (`rule2/convolved`, `povs`, a variant's name).
+    pub config: String,
     /// Scale of the protocol's offsets.
     pub offset_scale: f64,
     /// Runs at this scale.
@@ -629,7 +635,7 @@ pub fn domain(records: &[RunRecord]) -> Vec<DomainPoint> {
     for r in records {
         // Scales are positive, so their bits order as the values.
         let entry = groups
-            .entry((&r.method, r.offset_scale.to_bits()))
+            .entry((&r.config, r.offset_scale.to_bits()))
             .or_insert((r.offset_scale, 0, 0));
         entry.1 += 1;
         entry.2 += usize::from(r.success);
@@ -638,7 +644,7 @@ pub fn domain(records: &[RunRecord]) -> Vec<DomainPoint> {
         .into_iter()
         .map(
             |((method, _), (offset_scale, runs, successes))| DomainPoint {
-                method: method.to_string(),
+                config: method.to_string(),
                 offset_scale,
                 runs,
                 successes,
@@ -664,14 +670,14 @@ pub fn domain_markdown(points: &[DomainPoint]) -> String {
     s.push_str("\n|---|");
     s.push_str(&"---:|".repeat(scales.len()));
     s.push('\n');
-    let mut methods: Vec<&str> = points.iter().map(|p| p.method.as_str()).collect();
+    let mut methods: Vec<&str> = points.iter().map(|p| p.config.as_str()).collect();
     methods.dedup();
     for method in methods {
         let _ = write!(s, "| {method} |");
         for scale in &scales {
             match points
                 .iter()
-                .find(|p| p.method == method && p.offset_scale == *scale)
+                .find(|p| p.config == method && p.offset_scale == *scale)
             {
                 Some(p) => {
                     let _ = write!(s, " {:.1} % ({}/{}) |", p.rate(), p.successes, p.runs);
@@ -684,14 +690,14 @@ pub fn domain_markdown(points: &[DomainPoint]) -> String {
     s
 }
 
-/// Write the domain curve as CSV (`method,offset_scale,runs,successes,success_percent`).
+/// Write the domain curve as CSV (`config,offset_scale,runs,successes,success_percent`).
 pub fn write_domain_csv(path: &Path, points: &[DomainPoint]) -> anyhow::Result<()> {
-    let mut text = String::from("method,offset_scale,runs,successes,success_percent\n");
+    let mut text = String::from("config,offset_scale,runs,successes,success_percent\n");
     for p in points {
         let _ = writeln!(
             text,
             "{},{},{},{},{:.2}",
-            p.method,
+            p.config,
             p.offset_scale,
             p.runs,
             p.successes,
@@ -739,12 +745,12 @@ fn draw_domain<DB: plotters::prelude::DrawingBackend>(
         .y_desc("runs converged (%)")
         .draw()
         .map_err(crate::plot::error)?;
-    let mut methods: Vec<&str> = points.iter().map(|p| p.method.as_str()).collect();
+    let mut methods: Vec<&str> = points.iter().map(|p| p.config.as_str()).collect();
     methods.dedup();
     for (i, method) in methods.into_iter().enumerate() {
         let line: Vec<(f64, f64)> = points
             .iter()
-            .filter(|p| p.method == method)
+            .filter(|p| p.config == method)
             .map(|p| (p.offset_scale, p.rate()))
             .collect();
         let color = Palette99::pick(i).to_rgba();
@@ -764,7 +770,7 @@ fn draw_domain<DB: plotters::prelude::DrawingBackend>(
 /// desired pose) converged at `s` and at every smaller scale run (a scale with no run
 /// along the axis ends the basin); 0 if none.
 pub fn axis_basins(records: &[RunRecord]) -> Vec<(String, [f64; 6])> {
-    let mut methods: Vec<&str> = records.iter().map(|r| r.method.as_str()).collect();
+    let mut methods: Vec<&str> = records.iter().map(|r| r.config.as_str()).collect();
     methods.sort_unstable();
     methods.dedup();
     let mut scales: Vec<f64> = records.iter().map(|r| r.offset_scale).collect();
@@ -777,7 +783,7 @@ pub fn axis_basins(records: &[RunRecord]) -> Vec<(String, [f64; 6])> {
                 let mut largest = 0.0;
                 for &scale in &scales {
                     let mut runs = records.iter().filter(|r| {
-                        r.method == method && r.initial / 2 == axis && r.offset_scale == scale
+                        r.config == method && r.initial / 2 == axis && r.offset_scale == scale
                     });
                     let mut any = false;
                     let all = runs.all(|r| {

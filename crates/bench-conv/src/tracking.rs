@@ -5,7 +5,7 @@
 //! name = "fig4"
 //! camera = "omni-320x240.toml"     # camera TOML, relative to this file
 //! methods = ["povs", "rule2"]      # PoT and PGMoT
-//! steps = [1, 2, 5, 10, 20]        # use 1 frame in N
+//! frame_steps = [1, 2, 5, 10, 20]  # use 1 frame in N
 //! lost_threshold_m = 0.5           # a track is lost beyond this position error
 //! initial_offset = [0.05, -0.05, 0.02, 0.01, -0.01, 0.02]  # first frame's start, (t, θw) in the true camera's frame
 //!
@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
-use vvs::{Method, Servo, Tracker, VvsConfig};
+use vvs::{Method, Servo, StopReason, Tracker, VvsConfig};
 
 use crate::progress::Progress;
 use crate::protocol::Scene;
@@ -56,7 +56,7 @@ pub struct SequenceSpec {
     /// Methods: `povs` (PoT) and PGM rules (PGMoT with `rule2`).
     pub methods: Vec<Method>,
     /// Frame steps N (use 1 frame in N).
-    pub steps: Vec<usize>,
+    pub frame_steps: Vec<usize>,
     /// Position error beyond which a track is lost, metres.
     #[serde(default = "default_lost")]
     pub lost_threshold_m: f64,
@@ -100,8 +100,8 @@ impl SequenceSpec {
     fn check(&self) -> anyhow::Result<()> {
         ensure!(!self.methods.is_empty(), "the sequence names no method");
         ensure!(
-            !self.steps.is_empty() && self.steps.iter().all(|&n| n >= 1),
-            "steps must be a non-empty list of N >= 1"
+            !self.frame_steps.is_empty() && self.frame_steps.iter().all(|&n| n >= 1),
+            "frame_steps must be a non-empty list of N >= 1"
         );
         ensure!(
             self.lost_threshold_m > 0.0 && self.lost_threshold_m.is_finite(),
@@ -190,10 +190,10 @@ pub fn acquire(
 /// One tracked frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameRecord {
-    /// Method name (`povs`, `rule2`, …).
-    pub method: String,
-    /// Frame step N.
-    pub step: usize,
+    /// The method.
+    pub method: Method,
+    /// Frame step N (the track uses 1 frame in N).
+    pub frame_step: usize,
     /// Index of the frame in the sequence.
     pub frame: usize,
     /// Time of the frame, seconds.
@@ -209,7 +209,7 @@ pub struct FrameRecord {
     /// Iterations of step 1 and step 2.
     pub iterations: [usize; 2],
     /// Why the optimisation stopped.
-    pub stop: String,
+    pub stop: StopReason,
     /// Wall time of the frame's alignment, seconds.
     pub wall_time_s: f64,
 }
@@ -220,7 +220,7 @@ pub struct FrameRecord {
 pub fn track(
     servo: Servo<'_>,
     method: Method,
-    step: usize,
+    frame_step: usize,
     spec: &SequenceSpec,
     truth: &[Isometry3],
     acquired: &[Option<Image>],
@@ -228,13 +228,13 @@ pub fn track(
     let initial = truth[0] * Isometry3::from_pose_vector(spec.initial_offset)?;
     let mut tracker = Tracker::new(servo, method, initial)?;
     let mut records = Vec::new();
-    let report = tracker.track(acquired.iter().map(Option::as_ref), step, |tracked| {
+    let report = tracker.track(acquired.iter().map(Option::as_ref), frame_step, |tracked| {
         let k = tracked.frame;
         let estimate = tracked.outcome.world_from_camera;
         let (dt, dr) = estimate.distance_to(&truth[k]);
         records.push(FrameRecord {
-            method: method.name().to_string(),
-            step,
+            method,
+            frame_step,
             frame: k,
             time_s: spec.trajectory.time_s(k),
             true_pose: truth[k].to_pose_vector(),
@@ -242,7 +242,7 @@ pub fn track(
             position_error_m: dt,
             rotation_error_deg: dr.to_degrees(),
             iterations: tracked.outcome.iterations,
-            stop: tracked.outcome.stop.name().to_string(),
+            stop: tracked.outcome.stop,
             wall_time_s: tracked.wall_time_s,
         });
         if dt > spec.lost_threshold_m {
@@ -259,8 +259,8 @@ pub fn track(
 pub struct TrackingResults {
     /// Every aligned frame, by method then step then frame.
     pub records: Vec<FrameRecord>,
-    /// Whether each (method, step) track was lost.
-    pub lost: Vec<(String, usize, bool)>,
+    /// Whether each (method, frame step) track was lost.
+    pub lost: Vec<(Method, usize, bool)>,
     /// The ground truth of every frame.
     pub truth: Vec<Isometry3>,
     /// Wall time of the whole experiment, seconds.
@@ -271,15 +271,15 @@ pub struct TrackingResults {
 type Series = (String, plotters::style::RGBAColor, Vec<(f64, f64)>);
 
 impl TrackingResults {
-    /// The records of one track (method name, step N), in frame order.
+    /// The records of one track (method, frame step N), in frame order.
     pub fn track(
         &self,
-        method: &str,
-        step: usize,
+        method: Method,
+        frame_step: usize,
     ) -> impl DoubleEndedIterator<Item = &FrameRecord> {
         self.records
             .iter()
-            .filter(move |r| r.method == method && r.step == step)
+            .filter(move |r| r.method == method && r.frame_step == frame_step)
     }
 
     /// Every track as (legend label, colour, points given by `point`), in the order of
@@ -289,11 +289,11 @@ impl TrackingResults {
         self.lost
             .iter()
             .enumerate()
-            .map(|(i, (method, step, _))| {
+            .map(|(i, (method, frame_step, _))| {
                 (
-                    format!("{} N={step}", display_name(method)),
+                    format!("{} N={frame_step}", display_name(*method)),
                     Palette99::pick(i).to_rgba(),
-                    self.track(method, *step).map(&point).collect(),
+                    self.track(*method, *frame_step).map(&point).collect(),
                 )
             })
             .collect()
@@ -311,7 +311,7 @@ pub fn run_sequence(
     let started = Instant::now();
     let truth = spec.trajectory.poses();
     let mut needed = vec![false; truth.len()];
-    for &n in &spec.steps {
+    for &n in &spec.frame_steps {
         for k in (0..truth.len()).step_by(n) {
             needed[k] = true;
         }
@@ -328,7 +328,7 @@ pub fn run_sequence(
     let jobs: Vec<(Method, usize)> = spec
         .methods
         .iter()
-        .flat_map(|&m| spec.steps.iter().map(move |&n| (m, n)))
+        .flat_map(|&m| spec.frame_steps.iter().map(move |&n| (m, n)))
         .collect();
     let total_frames: u64 = jobs
         .iter()
@@ -356,7 +356,7 @@ pub fn run_sequence(
     for (&(method, n), output) in jobs.iter().zip(outputs) {
         let (r, l) = output.with_context(|| format!("tracking {} with N = {n}", method.name()))?;
         records.extend(r);
-        lost.push((method.name().to_string(), n, l));
+        lost.push((method, n, l));
     }
     Ok((
         TrackingResults {
@@ -369,86 +369,131 @@ pub fn run_sequence(
     ))
 }
 
-const CSV_HEADER: &str = "method,step,frame,time_s,true_tx,true_ty,true_tz,true_wx,true_wy,true_wz,est_tx,est_ty,est_tz,est_wx,est_wy,est_wz,position_error_m,rotation_error_deg,iterations_step1,iterations_step2,stop,wall_time_s";
+const CSV_HEADER: [&str; 22] = [
+    "method",
+    "frame_step",
+    "frame",
+    "time_s",
+    "true_tx",
+    "true_ty",
+    "true_tz",
+    "true_wx",
+    "true_wy",
+    "true_wz",
+    "est_tx",
+    "est_ty",
+    "est_tz",
+    "est_wx",
+    "est_wy",
+    "est_wz",
+    "position_error_m",
+    "rotation_error_deg",
+    "iterations_step1",
+    "iterations_step2",
+    "stop",
+    "wall_time_s",
+];
 
-/// Write the per-frame CSV.
+/// Write the per-frame CSV (through the `csv` crate; numbers in fixed formats, so
+/// that two runs compare as text), atomically.
 pub fn write_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
-    let mut s = String::from(CSV_HEADER);
-    s.push('\n');
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    writer.write_record(CSV_HEADER)?;
     for r in records {
-        let _ = write!(s, "{},{},{},{:.6}", r.method, r.step, r.frame, r.time_s);
-        for v in r.true_pose.iter().chain(&r.estimated_pose) {
-            let _ = write!(s, ",{v:.9}");
-        }
-        let _ = writeln!(
-            s,
-            ",{:.9},{:.6},{},{},{},{:.6}",
-            r.position_error_m,
-            r.rotation_error_deg,
-            r.iterations[0],
-            r.iterations[1],
-            r.stop,
-            r.wall_time_s
+        let mut row = vec![
+            r.method.to_string(),
+            r.frame_step.to_string(),
+            r.frame.to_string(),
+            format!("{:.6}", r.time_s),
+        ];
+        row.extend(
+            r.true_pose
+                .iter()
+                .chain(&r.estimated_pose)
+                .map(|v| format!("{v:.9}")),
         );
+        row.extend([
+            format!("{:.9}", r.position_error_m),
+            format!("{:.6}", r.rotation_error_deg),
+            r.iterations[0].to_string(),
+            r.iterations[1].to_string(),
+            r.stop.to_string(),
+            format!("{:.6}", r.wall_time_s),
+        ]);
+        writer.write_record(&row)?;
     }
-    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+    let bytes = writer.into_inner().context("encoding the tracking CSV")?;
+    crate::report::write_atomically(path, &bytes)
 }
 
-/// Read a per-frame CSV written by [`write_csv`].
+/// Read a per-frame CSV written by [`write_csv`]; errors name the file, line and field.
 pub fn read_csv(path: &Path) -> anyhow::Result<Vec<FrameRecord>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut lines = text.lines();
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .from_path(path)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let header = reader
+        .headers()
+        .with_context(|| format!("reading {}", path.display()))?
+        .clone();
     ensure!(
-        lines.next() == Some(CSV_HEADER),
-        "{}: not a tracking CSV",
+        header.iter().eq(CSV_HEADER),
+        "{}: not a tracking CSV (unexpected header)",
         path.display()
     );
-    lines
-        .enumerate()
-        .map(|(i, line)| {
-            let f: Vec<&str> = line.split(',').collect();
-            ensure!(
-                f.len() == 22,
-                "{}: line {}: {} fields",
-                path.display(),
-                i + 2,
-                f.len()
-            );
-            let num = |k: usize| -> anyhow::Result<f64> {
-                f[k].parse()
-                    .with_context(|| format!("{}: line {}: field {k}", path.display(), i + 2))
+    let mut records = Vec::new();
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let f = row.with_context(|| format!("{}:{line}", path.display()))?;
+        ensure!(
+            f.len() == CSV_HEADER.len(),
+            "{}:{line}: {} fields, expected {}",
+            path.display(),
+            f.len(),
+            CSV_HEADER.len()
+        );
+        macro_rules! parse {
+            ($i:expr) => {
+                f[$i].parse().with_context(|| {
+                    format!(
+                        "{}:{line}: field {}: `{}`",
+                        path.display(),
+                        CSV_HEADER[$i],
+                        &f[$i]
+                    )
+                })?
             };
-            let mut true_pose = [0.0; 6];
-            let mut estimated_pose = [0.0; 6];
-            for j in 0..6 {
-                true_pose[j] = num(4 + j)?;
-                estimated_pose[j] = num(10 + j)?;
-            }
-            Ok(FrameRecord {
-                method: f[0].to_string(),
-                step: num(1)? as usize,
-                frame: num(2)? as usize,
-                time_s: num(3)?,
-                true_pose,
-                estimated_pose,
-                position_error_m: num(16)?,
-                rotation_error_deg: num(17)?,
-                iterations: [num(18)? as usize, num(19)? as usize],
-                stop: f[20].to_string(),
-                wall_time_s: num(21)?,
-            })
-        })
-        .collect()
+        }
+        let mut true_pose = [0.0; 6];
+        let mut estimated_pose = [0.0; 6];
+        for j in 0..6 {
+            true_pose[j] = parse!(4 + j);
+            estimated_pose[j] = parse!(10 + j);
+        }
+        records.push(FrameRecord {
+            method: parse!(0),
+            frame_step: parse!(1),
+            frame: parse!(2),
+            time_s: parse!(3),
+            true_pose,
+            estimated_pose,
+            position_error_m: parse!(16),
+            rotation_error_deg: parse!(17),
+            iterations: [parse!(18), parse!(19)],
+            stop: parse!(20),
+            wall_time_s: parse!(21),
+        });
+    }
+    Ok(records)
 }
 
 /// Summary of one track.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrackSummary {
-    /// Method name.
-    pub method: String,
+    /// The method.
+    pub method: Method,
     /// Frame step N.
-    pub step: usize,
+    pub frame_step: usize,
     /// Frames aligned.
     pub frames: usize,
     /// Frames the track should have aligned.
@@ -474,22 +519,22 @@ pub fn summarize(results: &TrackingResults) -> Vec<TrackSummary> {
     results
         .lost
         .iter()
-        .map(|(method, step, lost)| {
-            let rs: Vec<&FrameRecord> = results.track(method, *step).collect();
+        .map(|&(method, frame_step, lost)| {
+            let rs: Vec<&FrameRecord> = results.track(method, frame_step).collect();
             let n = rs.len().max(1) as f64;
             let rms = |f: &dyn Fn(&FrameRecord) -> f64| {
                 (rs.iter().map(|r| f(r).powi(2)).sum::<f64>() / n).sqrt()
             };
             TrackSummary {
-                method: method.clone(),
-                step: *step,
+                method,
+                frame_step,
                 frames: rs.len(),
-                expected_frames: results.truth.len().div_ceil(*step),
+                expected_frames: results.truth.len().div_ceil(frame_step),
                 rmse_position_m: rms(&|r| r.position_error_m),
                 rmse_rotation_deg: rms(&|r| r.rotation_error_deg),
                 final_drift_m: rs.last().map_or(f64::NAN, |r| r.position_error_m),
                 max_position_error_m: rs.iter().map(|r| r.position_error_m).fold(0.0, f64::max),
-                lost_at: if *lost {
+                lost_at: if lost {
                     rs.last().map(|r| r.frame)
                 } else {
                     None
@@ -506,10 +551,10 @@ pub fn summarize(results: &TrackingResults) -> Vec<TrackSummary> {
 }
 
 /// Display name of a method in tracking (the paper's PoT and PGMoT).
-pub fn display_name(method: &str) -> String {
+pub fn display_name(method: Method) -> String {
     match method {
-        "povs" => "PoT".into(),
-        "rule2" => "PGMoT".into(),
+        Method::Povs => "PoT".into(),
+        Method::Rule2 => "PGMoT".into(),
         other => format!("PGMoT ({other})"),
     }
 }
@@ -531,8 +576,8 @@ pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m
         let _ = writeln!(
             s,
             "| {} | {} | {}/{} | {:.4} m | {:.3}° | {:.4} m | {:.4} m | {} | {:.2} s | {:.0} |",
-            display_name(&t.method),
-            t.step,
+            display_name(t.method),
+            t.frame_step,
             t.frames,
             t.expected_frames,
             t.rmse_position_m,
@@ -696,7 +741,7 @@ pub fn write_results(
     let summary = summary_markdown(&spec.name, results, spec.lost_threshold_m);
     crate::report::write_atomically(&out.join("summary.md"), summary.as_bytes())?;
     plot(results, out)?;
-    let Some(&n) = spec.steps.iter().max() else {
+    let Some(&n) = spec.frame_steps.iter().max() else {
         return Ok(summary);
     };
     let last = results.truth.len().saturating_sub(1) / n * n;
@@ -704,7 +749,7 @@ pub fn write_results(
         frame.save_png(out.join(format!("acquired-n{n}-frame{last}.png")))?;
         let mut renderer = Renderer::new(camera.clone(), RenderOptions::default())?;
         for method in &spec.methods {
-            let name = method.name();
+            let name = *method;
             // The estimate at the last frame the track reached.
             let Some(r) = results.track(name, n).next_back() else {
                 continue;

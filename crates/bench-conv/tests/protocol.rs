@@ -132,7 +132,7 @@ fn shards_merge_to_the_single_run() {
     // factors).
     for (i, part) in parts.iter().enumerate() {
         let methods: std::collections::BTreeSet<&str> =
-            part.iter().map(|r| r.method.as_str()).collect();
+            part.iter().map(|r| r.config.as_str()).collect();
         assert_eq!(methods.len(), 4, "shard {i}: {methods:?}");
         assert_eq!(part.len() % 4, 0, "shard {i}");
     }
@@ -151,8 +151,8 @@ fn shards_merge_to_the_single_run() {
     for (a, b) in merged.iter().zip(&all) {
         // Everything but the wall time is identical.
         assert_eq!(
-            (a.run_id, &a.method, a.desired, a.initial),
-            (b.run_id, &b.method, b.desired, b.initial)
+            (a.run_id, &a.config, a.desired, a.initial),
+            (b.run_id, &b.config, b.desired, b.initial)
         );
         assert!(
             (a.final_position_error_m - b.final_position_error_m).abs()
@@ -315,12 +315,13 @@ fn csv_thresholds_and_results_folders_are_safe() {
         desired: 0,
         offset_scale: 0.5,
         initial: id,
-        method: "rule2,x".into(),
+        config: "rule2,x".into(),
+        method: vvs::Method::Rule2,
         final_position_error_m: error,
         final_rotation_error_deg: 0.1,
         iterations_step1: 3,
         iterations_step2: 4,
-        stop: "stalled".into(),
+        stop: vvs::StopReason::Stalled,
         lambda: 1.0,
         cost: f64::NAN,
         wall_time_s: 0.25,
@@ -332,7 +333,7 @@ fn csv_thresholds_and_results_folders_are_safe() {
     let back = read_csv(&path).unwrap();
     assert_eq!(back.len(), 2);
     assert_eq!(back[0].scene, records[0].scene);
-    assert_eq!(back[1].method, "rule2,x");
+    assert_eq!(back[1].config, "rule2,x");
     let merged = merge(vec![back]).unwrap();
     assert_eq!(merged.len(), 2);
     for bad in [f64::NAN, f64::INFINITY, -1.0] {
@@ -460,12 +461,13 @@ fn domain_curve_and_axis_basins_count_the_records() {
         desired: 0,
         offset_scale: scale,
         initial,
-        method: method.into(),
+        config: method.into(),
+        method: vvs::Method::Rule2,
         final_position_error_m: if success { 0.001 } else { 3.0 },
         final_rotation_error_deg: 0.0,
         iterations_step1: 1,
         iterations_step2: 1,
-        stop: "converged".into(),
+        stop: vvs::StopReason::Converged,
         lambda: 1.0,
         cost: 0.0,
         wall_time_s: 0.0,
@@ -486,12 +488,12 @@ fn domain_curve_and_axis_basins_count_the_records() {
     assert_eq!(points.len(), 6);
     let a_half = points
         .iter()
-        .find(|p| p.method == "a" && p.offset_scale == 0.5)
+        .find(|p| p.config == "a" && p.offset_scale == 0.5)
         .unwrap();
     assert_eq!((a_half.runs, a_half.successes), (12, 11));
     let a_two = points
         .iter()
-        .find(|p| p.method == "a" && p.offset_scale == 2.0)
+        .find(|p| p.config == "a" && p.offset_scale == 2.0)
         .unwrap();
     assert_eq!(a_two.successes, 2);
     let table = domain_markdown(&points);

@@ -15,7 +15,7 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
     assert_eq!(full.acquisition, Acquisition::default());
     assert_eq!(quick.trajectory, full.trajectory);
     assert_eq!(quick.acquisition, full.acquisition);
-    assert_eq!(full.steps, vec![1, 2, 5, 10, 20]);
+    assert_eq!(full.frame_steps, vec![1, 2, 5, 10, 20]);
     // The vignetting ablation differs from the full sequence in its vignetting alone.
     let ablation =
         SequenceSpec::load(&root().join("fixtures/sequence-fig4-no-vignetting.toml")).unwrap();
@@ -45,7 +45,7 @@ fn pgm_tracking_follows_a_short_sequence() {
 name = "short"
 camera = "camera.toml"
 methods = ["rule2"]
-steps = [3]
+frame_steps = [3]
 initial_offset = [0.03, 0.0, 0.0, 0.0, 0.0, 0.01]
 
 [scene]
@@ -101,8 +101,8 @@ max_iterations = 80
     assert_eq!(back.len(), results.records.len());
     for (a, b) in back.iter().zip(&results.records) {
         assert_eq!(
-            (&a.method, a.step, a.frame, a.iterations, &a.stop),
-            (&b.method, b.step, b.frame, b.iterations, &b.stop)
+            (&a.method, a.frame_step, a.frame, a.iterations, &a.stop),
+            (&b.method, b.frame_step, b.frame, b.iterations, &b.stop)
         );
         assert!((a.position_error_m - b.position_error_m).abs() < 1e-8);
         for k in 0..6 {
@@ -123,7 +123,7 @@ max_iterations = 80
     // Bad files are clear errors.
     std::fs::write(
         dir.join("bad.toml"),
-        text.replace("steps = [3]", "steps = [0]"),
+        text.replace("frame_steps = [3]", "frame_steps = [0]"),
     )
     .unwrap();
     let err = SequenceSpec::load(&dir.join("bad.toml")).unwrap_err();

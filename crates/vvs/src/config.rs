@@ -57,9 +57,10 @@ impl std::str::FromStr for Method {
             .into_iter()
             .chain([Method::Global])
             .find(|m| m.name().eq_ignore_ascii_case(text.trim()))
-            .ok_or_else(|| VvsError::Config {
-                name: "method",
-                message: format!("unknown method `{text}` (povs, rule0, rule1, rule2, global)"),
+            .ok_or_else(|| VvsError::UnknownName {
+                what: "method",
+                text: text.to_string(),
+                expected: "povs, rule0, rule1, rule2, global".into(),
             })
     }
 }

@@ -31,6 +31,16 @@ pub enum VvsError {
     /// The initial pose is not finite.
     #[error("initial pose is not finite")]
     NonFinitePose,
+    /// A name (of a method, a stop reason) that names nothing.
+    #[error("unknown {what} `{text}` (expected one of: {expected})")]
+    UnknownName {
+        /// What was named.
+        what: &'static str,
+        /// The text.
+        text: String,
+        /// The names there are.
+        expected: String,
+    },
     /// [`crate::Tracker::align`] after the track was lost.
     #[error("the track is lost: an alignment diverged")]
     TrackLost,

@@ -19,9 +19,9 @@ pub enum Divergence {
     SingularSystem,
 }
 
-/// Why a run stopped.
+/// Why a run stopped. Written by its [`StopReason::name`] in files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[serde(try_from = "String", into = "String")]
 pub enum StopReason {
     /// The last stage converged (the update fell below the thresholds).
     Converged,
@@ -47,6 +47,56 @@ impl StopReason {
             StopReason::Diverged(Divergence::NotFinite) => "diverged:not_finite",
             StopReason::Diverged(Divergence::SingularSystem) => "diverged:singular",
         }
+    }
+}
+
+impl StopReason {
+    /// Every reason, in the order of their names' documentation.
+    pub const ALL: [StopReason; 8] = [
+        StopReason::Converged,
+        StopReason::IterationBudget,
+        StopReason::Stalled,
+        StopReason::Diverged(Divergence::NoValidPixels),
+        StopReason::Diverged(Divergence::CostExploded),
+        StopReason::Diverged(Divergence::LeftBounds),
+        StopReason::Diverged(Divergence::NotFinite),
+        StopReason::Diverged(Divergence::SingularSystem),
+    ];
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for StopReason {
+    type Err = crate::VvsError;
+
+    /// The reason of a [`StopReason::name`].
+    fn from_str(text: &str) -> Result<Self, crate::VvsError> {
+        StopReason::ALL
+            .into_iter()
+            .find(|r| r.name() == text.trim())
+            .ok_or_else(|| crate::VvsError::UnknownName {
+                what: "stop reason",
+                text: text.to_string(),
+                expected: StopReason::ALL.map(StopReason::name).join(", "),
+            })
+    }
+}
+
+impl TryFrom<String> for StopReason {
+    type Error = crate::VvsError;
+
+    fn try_from(text: String) -> Result<Self, crate::VvsError> {
+        text.parse()
+    }
+}
+
+impl From<StopReason> for String {
+    fn from(reason: StopReason) -> String {
+        reason.name().to_string()
     }
 }
 

@@ -90,6 +90,29 @@ enum Command {
         textures: Option<PathBuf>,
     },
     /// Render a cloud at a pose with a camera, to a PNG.
+    /// Check a protocol's results folder against the protocol file.
+    Check {
+        /// The protocol file.
+        protocol: PathBuf,
+        /// The results folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// The quick subset's extra expectations (PoVS fails from 8 m, Rule2 at least
+        /// as good as Rule0).
+        #[arg(long)]
+        quick: bool,
+        /// The run included the extra methods.
+        #[arg(long)]
+        extras: bool,
+    },
+    /// Check a tracking results folder against the sequence file.
+    CheckTrack {
+        /// The sequence file.
+        sequence: PathBuf,
+        /// The results folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
     Render {
         /// Camera TOML file.
         #[arg(long)]
@@ -349,6 +372,27 @@ fn main() -> anyhow::Result<()> {
             );
             splat::write_las(&city.cloud, &out)?;
             println!("wrote {}", out.display());
+        }
+        Command::Check {
+            protocol,
+            out,
+            quick,
+            extras,
+        } => {
+            bench_conv::check::check_protocol(&protocol, &out, quick, extras)?;
+            println!(
+                "checked: {} is consistent with {}",
+                out.display(),
+                protocol.display()
+            );
+        }
+        Command::CheckTrack { sequence, out } => {
+            bench_conv::check::check_sequence(&sequence, &out)?;
+            println!(
+                "checked: {} is consistent with {}",
+                out.display(),
+                sequence.display()
+            );
         }
         Command::Render {
             camera,
