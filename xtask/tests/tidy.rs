@@ -115,3 +115,30 @@ fn readme_names_the_test_command_ci_runs() {
     assert!(readme.contains(command), "README.md must give `{command}`");
     assert!(ci.contains(command), ".ci/run must run `{command}`");
 }
+
+/// A crate depends only on what its concept needs: the pictures and the features never
+/// see the renderer, LAS/LAZ or the synthetic world (not even in their tests), the
+/// renderer never sees a feature, and xtask links none of the project's heavy crates.
+#[test]
+fn crates_depend_only_on_what_their_concept_needs() {
+    let forbidden: [(&str, &[&str]); 6] = [
+        ("crates/frame", &["splat", "world", "las", "laz", "brightness", "pgm", "vvs"]),
+        ("crates/brightness", &["splat", "world", "las", "laz", "pgm", "vvs"]),
+        ("crates/pgm", &["splat", "world", "las", "laz", "vvs"]),
+        ("crates/splat", &["brightness", "pgm", "vvs", "bench-conv"]),
+        ("crates/world", &["brightness", "pgm", "vvs", "bench-conv"]),
+        ("xtask", &["bench-conv", "vvs", "splat", "pgm", "faer", "las", "plotters"]),
+    ];
+    for (dir, names) in forbidden {
+        let manifest = project_root().join(dir).join("Cargo.toml");
+        let text = read(&manifest);
+        for line in text.lines() {
+            let key = line.split(['.', '=', ' ']).next().unwrap_or("");
+            assert!(
+                !names.contains(&key),
+                "{} depends on `{key}`",
+                manifest.display()
+            );
+        }
+    }
+}

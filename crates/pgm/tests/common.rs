@@ -1,66 +1,53 @@
-//! Shared helpers: fixtures, the city, finite differences of the render → feature
-//! pipeline.
+//! Shared helpers: the fixture camera's path, a street-like frame.
 
-use std::sync::OnceLock;
-
-use frame::Frame;
-use glam::DVec3;
-use splat::{RenderOptions, Renderer};
+use frame::{Frame, PixelStatus};
 pub use test_support::workspace_root as root;
-use ucm::Isometry3;
-use world::city::{City, CityParams, camera_looking_down};
 
-pub fn fixture(name: &str) -> ucm::Camera {
-    ucm::Camera::load_toml(root().join("fixtures").join(name)).unwrap()
-}
-
-pub fn city() -> &'static City {
-    static CITY: OnceLock<City> = OnceLock::new();
-    CITY.get_or_init(|| City::generate(&CityParams::default()).unwrap())
-}
-
-/// A street-level pose in the city, 3 m above the road.
-pub fn street_pose() -> Isometry3 {
-    camera_looking_down(DVec3::new(-20.0, 0.8, 3.0), 0.05)
-}
-
-pub fn render(camera: &ucm::Camera, world_from_camera: &Isometry3) -> Frame {
-    let mut renderer = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+/// A deterministic frame with the statistics of a street view (the render → feature
+/// pipeline itself is tested in `vvs`, which composes the renderer and the features):
+/// texture at scales from 2 to 60 pixels, sharp edges, ranges from 2 to 40 m, a band
+/// of sky, masked outside the camera's region.
+pub fn street_like(camera: &ucm::Camera) -> Frame {
+    let (w, h) = (camera.width() as usize, camera.height() as usize);
+    let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
     let mut frame = Frame::for_camera(camera);
-    renderer
-        .render(&city().cloud, &world_from_camera.inverse(), &mut frame)
-        .unwrap();
+    let hash = |x: i64, y: i64| {
+        let mut v = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        v ^= v >> 29;
+        v = v.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        (v >> 40) as f64 / (1u64 << 24) as f64
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let k = y * w + x;
+            if !camera.valid_pixels()[k] {
+                frame.intensity[k] = 0.0;
+                frame.range_m[k] = f32::NAN;
+                frame.status[k] = PixelStatus::Masked;
+                continue;
+            }
+            let (u, v) = (x as f64, y as f64);
+            let radius = ((u - cx).powi(2) + (v - cy).powi(2)).sqrt();
+            let angle = (v - cy).atan2(u - cx);
+            if radius > 0.93 * cy && angle.sin() > 0.3 {
+                frame.intensity[k] = 0.85;
+                frame.status[k] = PixelStatus::Sky;
+                continue;
+            }
+            let blocks = hash((u / 9.0).floor() as i64, (v / 7.0).floor() as i64);
+            let fine = hash(x as i64, y as i64);
+            let value = 0.45
+                + 0.15 * (u / 23.0 + 1.3 * (v / 31.0).sin()).sin()
+                + 0.1 * (angle * 7.0).cos()
+                + 0.15 * (blocks - 0.5)
+                + 0.06 * (fine - 0.5)
+                + if (angle * 5.0).sin() > 0.6 { 0.12 } else { 0.0 };
+            frame.intensity[k] = value.clamp(0.0, 1.0) as f32;
+            frame.range_m[k] =
+                (2.0 + 38.0 * (radius / cy).powi(3) * (1.0 + 0.2 * (angle * 3.0).sin())) as f32;
+            frame.status[k] = PixelStatus::Hit;
+        }
+    }
     frame
-}
-
-/// Cosine similarity and relative error of two vectors.
-pub fn compare(analytic: &[f64], numeric: &[f64]) -> (f64, f64) {
-    let dot: f64 = analytic.iter().zip(numeric).map(|(a, b)| a * b).sum();
-    let na = analytic.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let nb = numeric.iter().map(|b| b * b).sum::<f64>().sqrt();
-    let diff = analytic
-        .iter()
-        .zip(numeric)
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    (dot / (na * nb).max(1e-300), diff / nb.max(1e-300))
-}
-
-/// `(F(exp(ε v)) − F(exp(−ε v))) / 2ε` of a per-sample feature `F` of the rendering at
-/// the pose moved by the twist `v` (camera frame).
-pub fn pipeline_difference(
-    camera: &ucm::Camera,
-    world_from_camera: &Isometry3,
-    v: [f64; 6],
-    eps: f64,
-    mut feature: impl FnMut(&Frame) -> Vec<f32>,
-) -> Vec<f64> {
-    let at = |s: f64| *world_from_camera * Isometry3::exp(v.map(|c| c * s)).unwrap();
-    let plus = feature(&render(camera, &at(eps)));
-    let minus = feature(&render(camera, &at(-eps)));
-    plus.iter()
-        .zip(&minus)
-        .map(|(a, b)| (f64::from(*a) - f64::from(*b)) / (2.0 * eps))
-        .collect()
 }

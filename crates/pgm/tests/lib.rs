@@ -2,5 +2,4 @@
 
 mod common;
 mod convolve;
-mod pipeline;
 mod transform;

@@ -131,7 +131,7 @@ fn j_lambda_matches_central_difference_in_lambda() {
 fn stride_subsamples_the_full_grid() {
     let camera =
         Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
-    let frame = crate::common::render(&camera, &crate::common::street_pose());
+    let frame = crate::common::street_like(&camera);
     let mut full = Pgm::new(&camera, PgmOptions::default()).unwrap();
     let mut coarse = Pgm::new(
         &camera,
@@ -153,7 +153,7 @@ fn stride_subsamples_the_full_grid() {
     }
 }
 
-/// On a rendered street view at λ = 3, 15 and 40, every output of the recursive
+/// On a street-like frame at λ = 3, 15 and 40, every output of the recursive
 /// filters (G, J_λ, both L_G) against the exact correlation (kernels truncated at 8λ,
 /// where the tail is below f32 precision): the largest difference within 5e-5 of the
 /// output's largest magnitude up to λ = 15, 2.5e-4 at λ = 40.
@@ -161,7 +161,7 @@ fn stride_subsamples_the_full_grid() {
 fn recursive_filters_match_the_exact_correlation() {
     let camera =
         Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
-    let frame = crate::common::render(&camera, &crate::common::street_pose());
+    let frame = crate::common::street_like(&camera);
     let exact_options = PgmOptions {
         kernel_radius_lambdas: 8.0,
         recursive_from_lambda: None,
@@ -291,7 +291,7 @@ fn normalization_centres_and_scales() {
 fn transform_is_deterministic_across_thread_counts() {
     let camera =
         Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
-    let frame = crate::common::render(&camera, &crate::common::street_pose());
+    let frame = crate::common::street_like(&camera);
     type Outputs = (Vec<f32>, Vec<f32>, Vec<[f32; 6]>);
     let results: Vec<Outputs> = [1, 2]
         .into_iter()

@@ -8,4 +8,6 @@ mod convergence;
 mod degenerate;
 mod global;
 mod localize;
+mod pipeline;
+mod pipeline_support;
 mod track;

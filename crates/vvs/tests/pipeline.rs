@@ -5,7 +5,7 @@
 use brightness::Brightness;
 use pgm::{Pgm, PgmJacobian, PgmOptions};
 
-use crate::common::*;
+use crate::pipeline_support::*;
 
 const AXES: [&str; 6] = ["tx", "ty", "tz", "wx", "wy", "wz"];
 
@@ -22,7 +22,7 @@ fn eps(axis: usize) -> f64 {
 }
 
 fn lg_cosines(jacobian: PgmJacobian, lambda: f32) -> Vec<(f64, f64)> {
-    let camera = fixture("omni-320x240.toml");
+    let camera = crate::common::fixture();
     let pose = street_pose();
     let mut pgm = Pgm::new(&camera, PgmOptions::default()).unwrap();
     pgm.compute(&render(&camera, &pose), lambda, jacobian)
@@ -89,7 +89,7 @@ fn paper_lg_is_wrong_near_the_mask_edge() {
 
 #[test]
 fn brightness_li_matches_the_pipeline() {
-    let camera = fixture("omni-320x240.toml");
+    let camera = crate::common::fixture();
     let pose = street_pose();
     let mut feature = Brightness::new(&camera);
     feature.compute(&render(&camera, &pose)).unwrap();
