@@ -122,12 +122,29 @@ fn readme_names_the_test_command_ci_runs() {
 #[test]
 fn crates_depend_only_on_what_their_concept_needs() {
     let forbidden: [(&str, &[&str]); 6] = [
-        ("crates/frame", &["splat", "world", "las", "laz", "brightness", "pgm", "vvs"]),
-        ("crates/brightness", &["splat", "world", "las", "laz", "pgm", "vvs"]),
+        (
+            "crates/frame",
+            &["splat", "world", "las", "laz", "brightness", "pgm", "vvs"],
+        ),
+        (
+            "crates/brightness",
+            &["splat", "world", "las", "laz", "pgm", "vvs"],
+        ),
         ("crates/pgm", &["splat", "world", "las", "laz", "vvs"]),
         ("crates/splat", &["brightness", "pgm", "vvs", "bench-conv"]),
         ("crates/world", &["brightness", "pgm", "vvs", "bench-conv"]),
-        ("xtask", &["bench-conv", "vvs", "splat", "pgm", "faer", "las", "plotters"]),
+        (
+            "xtask",
+            &[
+                "bench-conv",
+                "vvs",
+                "splat",
+                "pgm",
+                "faer",
+                "las",
+                "plotters",
+            ],
+        ),
     ];
     for (dir, names) in forbidden {
         let manifest = project_root().join(dir).join("Cargo.toml");

@@ -35,7 +35,6 @@ pub mod tracking;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use glam::DVec3;
 use ucm::Isometry3;
 
 /// Read and parse a TOML file (`what` names it in errors); returns the value and the
@@ -104,24 +103,14 @@ pub fn parse_numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {
     Ok(out)
 }
 
-/// `world_from_camera` from either the paper's pose vector `(t, θw)` or a camera
-/// looking down at `x, y, z` with its X axis at `heading_deg` from the world X axis.
+/// `world_from_camera` from the command line's `--pose` (the paper's `(t, θw)`) or
+/// `--looking-down` (`x, y, z, heading_deg`): a [`protocol::PoseSpec`].
 pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Result<Isometry3> {
-    match (pose, looking_down) {
-        (Some(p), None) => Ok(Isometry3::from_pose_vector(parse_numbers::<6>(p)?)?),
-        (None, Some(l)) => {
-            let [x, y, z, heading] = parse_numbers::<4>(l)?;
-            anyhow::ensure!(
-                [x, y, z, heading].iter().all(|v| v.is_finite()),
-                "--looking-down {l}: every value must be finite"
-            );
-            Ok(world::city::camera_looking_down(
-                DVec3::new(x, y, z),
-                heading.to_radians(),
-            ))
-        }
-        _ => bail!("give exactly one of --pose and --looking-down"),
-    }
+    let spec = protocol::PoseSpec {
+        pose: pose.map(parse_numbers::<6>).transpose()?,
+        looking_down: looking_down.map(parse_numbers::<4>).transpose()?,
+    };
+    spec.world_from_camera()
 }
 
 /// Register the plots' font (Hack, embedded by `epaint_default_fonts`) once, so that

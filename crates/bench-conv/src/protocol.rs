@@ -82,7 +82,7 @@ pub struct Protocol {
     /// Offsets of the initial poses.
     pub offsets: Offsets,
     /// Desired poses.
-    pub desired: Vec<DesiredPose>,
+    pub desired: Vec<PoseSpec>,
     /// The prior box of [`Method::Global`] (default: the unscaled `[offsets]`).
     #[serde(default)]
     pub prior: Option<PriorBox>,
@@ -232,16 +232,34 @@ impl Sampling {
     }
 }
 
-/// A desired pose.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+/// A pose as a user gives it, in a file (`pose = […]` or `looking_down = […]`) or on
+/// the command line (`--pose` or `--looking-down`): exactly one of the two.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct DesiredPose {
+pub struct PoseSpec {
     /// `x, y, z` (m) and heading (deg) of a camera looking down.
     #[serde(default)]
     pub looking_down: Option<[f64; 4]>,
     /// The paper's pose vector `(t, θw)` of `world_from_camera` (m, rad).
     #[serde(default)]
     pub pose: Option<[f64; 6]>,
+}
+
+impl PoseSpec {
+    /// `world_from_camera`.
+    pub fn world_from_camera(&self) -> anyhow::Result<Isometry3> {
+        match (self.looking_down, self.pose) {
+            (Some(l), None) if !l.iter().all(|v| v.is_finite()) => {
+                bail!("looking_down {l:?} is not finite")
+            }
+            (Some([x, y, z, heading]), None) => Ok(world::city::camera_looking_down(
+                glam::DVec3::new(x, y, z),
+                heading.to_radians(),
+            )),
+            (None, Some(r)) => Ok(Isometry3::from_pose_vector(r)?),
+            _ => bail!("give exactly one of `looking_down` and `pose`"),
+        }
+    }
 }
 
 /// An extra method.
@@ -376,18 +394,7 @@ impl Protocol {
 
     /// `world_from_camera` of desired pose `k`.
     pub fn desired_pose(&self, k: usize) -> anyhow::Result<Isometry3> {
-        let d = &self.desired[k];
-        match (d.looking_down, d.pose) {
-            (Some(l), None) if !l.iter().all(|v| v.is_finite()) => {
-                bail!("looking_down {l:?} is not finite")
-            }
-            (Some([x, y, z, heading]), None) => Ok(world::city::camera_looking_down(
-                glam::DVec3::new(x, y, z),
-                heading.to_radians(),
-            )),
-            (None, Some(r)) => Ok(Isometry3::from_pose_vector(r)?),
-            _ => bail!("give exactly one of `looking_down` and `pose`"),
-        }
+        self.desired[k].world_from_camera()
     }
 
     /// The offset `(t, θw)` of initial pose `index` of desired pose `desired`, at

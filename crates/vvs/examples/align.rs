@@ -53,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.cost,
             et,
             er.to_degrees(),
-            r.step_translation_m
+            r.update_translation_m
         );
     }
     println!(

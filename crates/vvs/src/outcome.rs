@@ -114,9 +114,9 @@ pub struct IterationRecord {
     /// Mean squared residual.
     pub cost: f64,
     /// Translation of the update, metres.
-    pub step_translation_m: f64,
+    pub update_translation_m: f64,
     /// Rotation of the update, radians.
-    pub step_rotation_rad: f64,
+    pub update_rotation_rad: f64,
     /// Wall time of the iteration (render + feature + solve), seconds.
     pub time_s: f64,
 }

@@ -688,9 +688,9 @@ impl<'a> Servo<'a> {
                     iterations: iteration,
                 });
             }
-            // The step: x = −μ J⁺ e.
+            // The update: x = −μ J⁺ e.
             let eta = self.config.levenberg_marquardt;
-            let step: Option<([f64; 6], f64)> = match stage {
+            let solution: Option<([f64; 6], f64)> = match stage {
                 Stage::Pgm { .. } if optimise_lambda => {
                     self.rows7.clear();
                     self.rows7.extend(
@@ -713,7 +713,7 @@ impl<'a> Servo<'a> {
                     solve(&jtj, &jte, eta).map(|x| (x, 0.0))
                 }
             };
-            let Some((x, lambda_x)) = step else {
+            let Some((x, lambda_x)) = solution else {
                 return Ok(StageResult {
                     stop: StopReason::Diverged(Divergence::SingularSystem),
                     lambda,
@@ -724,8 +724,8 @@ impl<'a> Servo<'a> {
             let gain = self.config.gain;
             let v = x.map(|c| -gain * c);
             let lambda_dot = (-gain * lambda_x) as f32;
-            let step_t = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            let step_r = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
+            let update_t = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let update_r = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
             if self.config.keep_history {
                 history.push(IterationRecord {
                     stage: stage_number,
@@ -733,8 +733,8 @@ impl<'a> Servo<'a> {
                     pose: pose.to_pose_vector(),
                     lambda,
                     cost,
-                    step_translation_m: step_t,
-                    step_rotation_rad: step_r,
+                    update_translation_m: update_t,
+                    update_rotation_rad: update_r,
                     time_s: started.elapsed().as_secs_f64(),
                 });
             }
@@ -768,8 +768,8 @@ impl<'a> Servo<'a> {
                     iterations: iteration + 1,
                 });
             }
-            if step_t < self.config.converged_translation_m
-                && step_r < self.config.converged_rotation_rad
+            if update_t < self.config.converged_translation_m
+                && update_r < self.config.converged_rotation_rad
                 && lambda_dot.abs() < 1e-4
             {
                 return Ok(StageResult {
