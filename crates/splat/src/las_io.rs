@@ -70,6 +70,39 @@ fn las_error(path: &Path) -> impl Fn(las::Error) -> SplatError + '_ {
     }
 }
 
+/// Refuse a LAZ file whose `laszip` record describes no point item (the `laz` crate
+/// panics on one rather than report it): a corrupt file.
+fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), SplatError> {
+    use std::io::{Seek, SeekFrom};
+    let io_error = |source| SplatError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(io_error)?);
+    file.seek(SeekFrom::Start(u64::from(raw.header_size)))
+        .map_err(io_error)?;
+    for _ in 0..raw.number_of_variable_length_records {
+        let Ok(vlr) = las::raw::Vlr::read_from(&mut file, false) else {
+            return Ok(()); // a truncated record list: `las` reports it
+        };
+        let user_id = String::from_utf8_lossy(&vlr.user_id);
+        if vlr.record_id == 22204 && user_id.trim_end_matches('\0') == "laszip encoded" {
+            let items = laz::LazVlr::read_from(vlr.data.as_slice()).map(|v| v.items().len());
+            if let Ok(0) | Err(_) = items {
+                return Err(SplatError::Las {
+                    path: path.to_owned(),
+                    source: Box::new(las::Error::Io(std::io::Error::new(
+                        std::io::ErrorKind::InvalidData,
+                        "its laszip record describes no point item (corrupt LAZ)",
+                    ))),
+                });
+            }
+            return Ok(());
+        }
+    }
+    Ok(())
+}
+
 /// Refuse a LAZ file whose chunk table announces more chunks than the file has bytes
 /// (the `laz` crate would allocate the table from that count: 25 GB for a corrupt
 /// 10 KB file, found by our fuzzing). Mirrors `laz`'s own reading of the table's
@@ -157,6 +190,7 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
         });
     }
     if raw.point_data_record_format & 0x80 != 0 {
+        check_laz_items(path, &raw)?;
         check_laz_chunk_table(path, u64::from(raw.offset_to_point_data), file_bytes)?;
     }
     let mut reader = las::Reader::from_path(path).map_err(|e| {
