@@ -293,6 +293,43 @@ pub fn write_csv(path: &Path, records: &[RunRecord]) -> anyhow::Result<()> {
     write_atomically(path, &bytes)
 }
 
+/// The rows of a CSV file whose header is exactly `header`, each with its line number
+/// in the file (as the `csv` crate counts them: quoted line breaks and blank lines
+/// included) and exactly `header.len()` fields; `what` names the kind of file in
+/// errors.
+pub(crate) fn csv_rows(
+    path: &Path,
+    header: &[&str],
+    what: &str,
+) -> anyhow::Result<Vec<(u64, csv::StringRecord)>> {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .from_path(path)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let found = reader
+        .headers()
+        .with_context(|| format!("reading {}", path.display()))?
+        .clone();
+    if found.iter().ne(header.iter().copied()) {
+        bail!("{}: not a {what} (unexpected header)", path.display());
+    }
+    let mut rows = Vec::new();
+    for row in reader.records() {
+        let row = row.with_context(|| format!("reading {}", path.display()))?;
+        let line = row.position().map_or(0, |p| p.line());
+        if row.len() != header.len() {
+            bail!(
+                "{}:{line}: {} fields, expected {}",
+                path.display(),
+                row.len(),
+                header.len()
+            );
+        }
+        rows.push((line, row));
+    }
+    Ok(rows)
+}
+
 /// Read a CSV written by [`write_csv`]. Errors name the file, line and field; errors
 /// that are NaN, infinite or negative, and an offset scale that is not positive, are
 /// refused (no statistic is computed from them).
@@ -304,32 +341,8 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Vec<RunRecord>> {
             path.display()
         );
     }
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .from_path(path)
-        .with_context(|| format!("reading {}", path.display()))?;
-    let header = reader
-        .headers()
-        .with_context(|| format!("reading {}", path.display()))?
-        .clone();
-    if header.iter().ne(HEADER) {
-        bail!(
-            "{}: not a bench-conv runs CSV (unexpected header)",
-            path.display()
-        );
-    }
     let mut records = Vec::new();
-    for (n, row) in reader.records().enumerate() {
-        let line = n + 2;
-        let f = row.with_context(|| format!("{}:{line}", path.display()))?;
-        if f.len() != HEADER.len() {
-            bail!(
-                "{}:{line}: {} fields, expected {}",
-                path.display(),
-                f.len(),
-                HEADER.len()
-            );
-        }
+    for (line, f) in csv_rows(path, &HEADER, "bench-conv runs CSV")? {
         let field = |i: usize| &f[i];
         let ctx = |i: usize| format!("{}:{line}: field {}", path.display(), HEADER[i]);
         macro_rules! parse {

@@ -428,30 +428,8 @@ pub fn write_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
 
 /// Read a per-frame CSV written by [`write_csv`]; errors name the file, line and field.
 pub fn read_csv(path: &Path) -> anyhow::Result<Vec<FrameRecord>> {
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .from_path(path)
-        .with_context(|| format!("reading {}", path.display()))?;
-    let header = reader
-        .headers()
-        .with_context(|| format!("reading {}", path.display()))?
-        .clone();
-    ensure!(
-        header.iter().eq(CSV_HEADER),
-        "{}: not a tracking CSV (unexpected header)",
-        path.display()
-    );
     let mut records = Vec::new();
-    for (n, row) in reader.records().enumerate() {
-        let line = n + 2;
-        let f = row.with_context(|| format!("{}:{line}", path.display()))?;
-        ensure!(
-            f.len() == CSV_HEADER.len(),
-            "{}:{line}: {} fields, expected {}",
-            path.display(),
-            f.len(),
-            CSV_HEADER.len()
-        );
+    for (line, f) in crate::report::csv_rows(path, &CSV_HEADER, "tracking CSV")? {
         macro_rules! parse {
             ($i:expr) => {
                 f[$i].parse().with_context(|| {
