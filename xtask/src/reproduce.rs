@@ -46,38 +46,38 @@ fn bench_conv(args: &[&std::ffi::OsStr], build: Build) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Run the tracking experiment of Fig. 4 (or its quick subset) and check the results.
+/// Run the tracking experiment of Fig. 4 as the paper tracks (`sequence-fig4.toml`)
+/// and beyond it (`sequence-fig4-improved.toml`: vignetting estimated with the pose,
+/// constant-velocity prediction), or their quick subsets, and check the results.
 pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
-    let (sequence, out) = if quick {
-        (
-            root.join("fixtures/sequence-fig4-quick.toml"),
-            root.join("results/fig4-quick"),
-        )
+    let runs: [(&str, &str); 2] = if quick {
+        [
+            ("sequence-fig4-quick.toml", "fig4-quick"),
+            ("sequence-fig4-quick-improved.toml", "fig4-quick-improved"),
+        ]
     } else {
-        (
-            root.join("fixtures/sequence-fig4.toml"),
-            root.join("results/fig4"),
-        )
+        [
+            ("sequence-fig4.toml", "fig4"),
+            ("sequence-fig4-improved.toml", "fig4-improved"),
+        ]
     };
-    bench_conv(
-        &[
-            "track".as_ref(),
-            sequence.as_os_str(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ],
-        build,
-    )?;
-    bench_conv(
-        &[
-            "check-track".as_ref(),
-            sequence.as_os_str(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ],
-        build,
-    )
+    for (sequence, out) in runs {
+        let sequence = root.join("fixtures").join(sequence);
+        let out = root.join("results").join(out);
+        for command in ["track", "check-track"] {
+            bench_conv(
+                &[
+                    command.as_ref(),
+                    sequence.as_os_str(),
+                    "--out".as_ref(),
+                    out.as_os_str(),
+                ],
+                build,
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// Run the Fig. 3 protocol (or its quick subset) and check the result files; with

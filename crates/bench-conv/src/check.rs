@@ -22,6 +22,8 @@ pub fn check_sequence(sequence: &Path, out: &Path) -> anyhow::Result<()> {
         "trajectories.svg".into(),
         "errors.png".into(),
         "errors.svg".into(),
+        "rmse.png".into(),
+        "rmse.svg".into(),
     ];
     let records = crate::tracking::read_csv(&out.join("frames.csv"))?;
     let frames = spec.trajectory.frames;

@@ -64,6 +64,10 @@ pub struct SequenceSpec {
     /// the true camera's frame.
     #[serde(default = "default_initial_offset")]
     pub initial_offset: [f64; 6],
+    /// Beyond the paper (off by default): start each frame from a constant-velocity
+    /// prediction ([`vvs::Tracker::with_constant_velocity`]).
+    #[serde(default)]
+    pub constant_velocity: bool,
     /// The cloud.
     pub scene: Scene,
     /// The trajectory.
@@ -226,7 +230,8 @@ pub fn track(
     acquired: &[Option<Image>],
 ) -> anyhow::Result<(Vec<FrameRecord>, bool)> {
     let initial = truth[0] * Isometry3::from_pose_vector(spec.initial_offset)?;
-    let mut tracker = Tracker::new(servo, method, initial)?;
+    let mut tracker =
+        Tracker::new(servo, method, initial)?.with_constant_velocity(spec.constant_velocity);
     let mut records = Vec::new();
     let report = tracker.track(acquired.iter().map(Option::as_ref), frame_step, |tracked| {
         let k = tracked.frame;
@@ -568,6 +573,27 @@ pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m
             t.mean_iterations
         );
     }
+    let lost: Vec<String> = summarize(results)
+        .iter()
+        .filter_map(|t| {
+            t.lost_at.map(|k| {
+                format!(
+                    "{} N = {} (at frame {k})",
+                    display_name(t.method),
+                    t.frame_step
+                )
+            })
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "\nLost tracks: {}.",
+        if lost.is_empty() {
+            "none".to_string()
+        } else {
+            lost.join(", ")
+        }
+    );
     s.push_str(
         "\nPaper (§4, qualitative, against a Lidar SLAM trajectory): PoT drifts as N grows \
          and fails at N = 20; PGMoT keeps tracking.\n",
@@ -597,7 +623,79 @@ pub fn plot(results: &TrackingResults, out: &Path) -> anyhow::Result<()> {
         SVGBackend::new(&out.join("errors.svg"), (900, 600)).into_drawing_area(),
         results,
     )?;
+    let summaries = summarize(results);
+    draw_rmse(
+        BitMapBackend::new(&out.join("rmse.png"), (800, 600)).into_drawing_area(),
+        &summaries,
+    )?;
+    draw_rmse(
+        SVGBackend::new(&out.join("rmse.svg"), (800, 600)).into_drawing_area(),
+        &summaries,
+    )?;
     Ok(())
+}
+
+/// Position RMSE against the frame step N, a line per method through the tracks that
+/// were not lost; a lost track is a cross at the top of the plot.
+fn draw_rmse<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    summaries: &[TrackSummary],
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    root.fill(&WHITE).map_err(crate::plot::error)?;
+    let largest = summaries.iter().map(|t| t.frame_step).max().unwrap_or(1) as f64;
+    let (top, bottom) = (1.0f64, 1e-3f64);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Position RMSE against N (crosses: lost)",
+            ("sans-serif", 20),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(
+            (0.8f64..largest * 1.25).log_scale(),
+            (bottom..top).log_scale(),
+        )
+        .map_err(crate::plot::error)?;
+    chart
+        .configure_mesh()
+        .x_desc("N (1 frame in N)")
+        .y_desc("position RMSE (m)")
+        .draw()
+        .map_err(crate::plot::error)?;
+    let mut methods: Vec<Method> = Vec::new();
+    for t in summaries {
+        if !methods.contains(&t.method) {
+            methods.push(t.method);
+        }
+    }
+    for (i, &method) in methods.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let tracks: Vec<&TrackSummary> = summaries.iter().filter(|t| t.method == method).collect();
+        let kept: Vec<(f64, f64)> = tracks
+            .iter()
+            .filter(|t| t.lost_at.is_none())
+            .map(|t| (t.frame_step as f64, t.rmse_position_m.clamp(bottom, top)))
+            .collect();
+        chart
+            .draw_series(kept.iter().map(|&p| Circle::new(p, 4, color.filled())))
+            .map_err(crate::plot::error)?;
+        chart
+            .draw_series(
+                tracks.iter().filter(|t| t.lost_at.is_some()).map(|t| {
+                    Cross::new((t.frame_step as f64, 0.8 * top), 6, color.stroke_width(2))
+                }),
+            )
+            .map_err(crate::plot::error)?;
+        crate::plot::line(
+            &mut chart,
+            kept,
+            display_name(method),
+            color.stroke_width(2),
+        )?;
+    }
+    crate::plot::finish(&mut chart, &root)
 }
 
 fn draw_trajectories<DB: plotters::prelude::DrawingBackend>(

@@ -28,6 +28,20 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
         }
     );
     assert!(full.vvs_config().unwrap().normalize);
+    assert!(!full.constant_velocity && !full.vvs_config().unwrap().vignetting);
+    // The improved tracking: the same sequences, tracked beyond the paper.
+    for (improved, plain) in [
+        ("sequence-fig4-improved.toml", &full),
+        ("sequence-fig4-quick-improved.toml", &quick),
+    ] {
+        let improved = SequenceSpec::load(&root().join("fixtures").join(improved)).unwrap();
+        assert_eq!(improved.trajectory, plain.trajectory);
+        assert_eq!(improved.acquisition, plain.acquisition);
+        assert_eq!(improved.frame_steps, plain.frame_steps);
+        assert_eq!(improved.methods, plain.methods);
+        assert_eq!(improved.initial_offset, plain.initial_offset);
+        assert!(improved.constant_velocity && improved.vvs_config().unwrap().vignetting);
+    }
 }
 
 /// A short, mildly shaken sequence through the city: PGMoT tracks every frame to

@@ -140,6 +140,9 @@ pub struct VvsConfig {
     pub lod_spacing_px: Option<f32>,
     /// Beyond the paper: the settings of [`Method::Global`].
     pub global: crate::GlobalConfig,
+    /// Beyond the paper (off by default): estimate a radial vignetting of the desired
+    /// picture with the pose, as two more unknowns ([`crate::photometric`]).
+    pub vignetting: bool,
     /// Keep the per-iteration history in the outcome.
     pub keep_history: bool,
     /// Render and transform each image on rayon's threads. The results are the same
@@ -174,6 +177,7 @@ impl Default for VvsConfig {
             pgm_recursive_from_lambda: 3.0,
             lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
             global: crate::GlobalConfig::default(),
+            vignetting: false,
             keep_history: true,
             parallel: true,
         }

@@ -6,6 +6,7 @@ mod error;
 pub mod global;
 pub mod localize;
 mod outcome;
+pub mod photometric;
 mod servo;
 pub mod solve;
 pub mod track;

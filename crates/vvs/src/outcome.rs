@@ -140,6 +140,10 @@ pub struct Outcome {
     /// [`crate::Servo::run_methods`] counts in full for every method sharing it; a
     /// global search counts all of its phases).
     pub time_s: f64,
+    /// The vignetting coefficients `(c₁, c₂)` estimated with the pose
+    /// ([`crate::VvsConfig::vignetting`] only).
+    #[serde(default)]
+    pub vignetting: Option<[f64; 2]>,
     /// What the global search did ([`crate::Method::Global`] only).
     #[serde(default)]
     pub search: Option<crate::SearchReport>,

@@ -3,13 +3,14 @@
 use std::time::Instant;
 
 use brightness::{Brightness, normal_equations};
-use frame::{AnyImage, Frame};
+use frame::{AnyImage, Frame, Image};
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
 use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 
 use crate::global::{PriorBox, SearchReport};
+use crate::photometric::{MAX_COEFFICIENT, RadialVignetting};
 use crate::solve::solve;
 use crate::{
     Divergence, IterationRecord, Method, Outcome, Robust, StopReason, VvsConfig, VvsError,
@@ -55,6 +56,12 @@ struct Level {
     frame: Frame,
     pgm: Pgm,
     brightness: Brightness,
+    /// The vignetting model's basis, the corrected rendering, and the transform of its
+    /// derivative pictures (used only with `VvsConfig::vignetting`).
+    vignetting: RadialVignetting,
+    corrected: Frame,
+    derivative: Image,
+    derivative_pgm: Pgm,
 }
 
 impl Level {
@@ -78,6 +85,19 @@ impl Level {
                 },
             )?,
             brightness: Brightness::new(&camera).with_normalization(config.normalize),
+            vignetting: RadialVignetting::new(&camera),
+            corrected: Frame::for_camera(&camera),
+            derivative: Image::new(camera.width(), camera.height()),
+            derivative_pgm: Pgm::new(
+                &camera,
+                PgmOptions {
+                    stride: config.pgm_stride,
+                    normalize: false,
+                    parallel: config.parallel,
+                    recursive_from_lambda: config.pgm_recursive(),
+                    ..PgmOptions::default()
+                },
+            )?,
             camera,
         })
     }
@@ -99,6 +119,9 @@ pub struct Servo<'a> {
     rows7: Vec<[f32; 7]>,
     scratch: Vec<f32>,
     search_desired: Vec<f32>,
+    rows9: Vec<[f32; 9]>,
+    columns: [Vec<f32>; 2],
+    vignetting_start: [f64; 2],
 }
 
 impl<'a> Servo<'a> {
@@ -130,7 +153,23 @@ impl<'a> Servo<'a> {
             rows7: Vec::new(),
             scratch: Vec::new(),
             search_desired: Vec::new(),
+            rows9: Vec::new(),
+            columns: [Vec::new(), Vec::new()],
+            vignetting_start: [0.0; 2],
         })
+    }
+
+    /// Where the vignetting coefficients start in the next runs (with
+    /// [`VvsConfig::vignetting`]; default 0: no vignetting). A tracker passes each
+    /// frame's estimate on to the next frame.
+    pub fn set_vignetting_start(&mut self, coefficients: [f64; 2]) {
+        self.vignetting_start = coefficients.map(|c| {
+            if c.is_finite() {
+                c.clamp(-MAX_COEFFICIENT, MAX_COEFFICIENT)
+            } else {
+                0.0
+            }
+        });
     }
 
     /// The configuration.
@@ -307,11 +346,13 @@ impl<'a> Servo<'a> {
         for &(_, index) in &screened {
             let mut pose = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
             history.clear();
+            let mut coefficients = self.vignetting_start;
             let result = self.run_stage(
                 planned,
                 settings.descent_iterations,
                 &desired_small,
                 &mut pose,
+                &mut coefficients,
                 &mut history,
             )?;
             descent_iterations += result.iterations;
@@ -510,6 +551,7 @@ impl<'a> Servo<'a> {
                         iterations: [0; 2],
                         history: Vec::new(),
                         time_s: 0.0,
+                        vignetting: None,
                         search: None,
                     };
                     let outcome =
@@ -551,13 +593,18 @@ impl<'a> Servo<'a> {
                 0 => desired,
                 k => &coarse_desired[k - 1],
             };
+            let mut coefficients = outcome.vignetting.unwrap_or(self.vignetting_start);
             let result = self.run_stage(
                 *planned,
                 budget,
                 level_desired,
                 &mut outcome.world_from_camera,
+                &mut coefficients,
                 &mut outcome.history,
             )?;
+            if self.config.vignetting {
+                outcome.vignetting = Some(coefficients);
+            }
             outcome.iterations[step] += result.iterations;
             outcome.lambda = result.lambda;
             outcome.cost = result.cost;
@@ -577,6 +624,7 @@ impl<'a> Servo<'a> {
         budget: usize,
         desired: &impl AnyImage,
         pose: &mut Isometry3,
+        coefficients: &mut [f64; 2],
         history: &mut Vec<IterationRecord>,
     ) -> Result<StageResult, VvsError> {
         let Planned {
@@ -591,7 +639,12 @@ impl<'a> Servo<'a> {
             frame,
             pgm,
             brightness,
+            vignetting,
+            corrected,
+            derivative,
+            derivative_pgm,
         } = &mut self.levels[level];
+        let vignetting_on = self.config.vignetting;
         // The desired feature, fixed for the stage.
         let (mut lambda, optimise_lambda) = match stage {
             Stage::Brightness => {
@@ -627,17 +680,50 @@ impl<'a> Servo<'a> {
                     iterations: iteration,
                 });
             }
+            // The rendering as the camera would see it (with the vignetting model).
+            let input: &Frame = if vignetting_on {
+                vignetting.apply(*coefficients, frame, corrected);
+                corrected
+            } else {
+                frame
+            };
             // Feature, residuals, rows.
             let (values, pixel_weights): (&[f32], Option<&[f32]>) = match stage {
                 Stage::Brightness => {
-                    brightness.compute(frame)?;
+                    brightness.compute(input)?;
                     (brightness.values(), None)
                 }
                 Stage::Pgm { .. } => {
-                    pgm.compute(frame, lambda, self.config.jacobian)?;
+                    pgm.compute(input, lambda, self.config.jacobian)?;
                     (pgm.values(), Some(pgm.weights()))
                 }
             };
+            if vignetting_on {
+                // The columns of the coefficients: the feature of each derivative picture.
+                let feature = match stage {
+                    Stage::Brightness => &*brightness,
+                    Stage::Pgm { .. } => pgm.brightness(),
+                };
+                let normalization = self
+                    .config
+                    .normalize
+                    .then(|| (feature.normalization_scale(), feature.image()));
+                for (k, column) in self.columns.iter_mut().enumerate() {
+                    vignetting.derivative(k, frame, feature.samples(), normalization, derivative);
+                    column.clear();
+                    match stage {
+                        Stage::Brightness => column.extend(
+                            feature
+                                .samples()
+                                .iter()
+                                .map(|&s| derivative.intensity[s as usize]),
+                        ),
+                        Stage::Pgm { .. } => {
+                            column.extend_from_slice(derivative_pgm.transform(derivative, lambda)?)
+                        }
+                    }
+                }
+            }
             let m = values.len();
             self.residuals.clear();
             self.residuals
@@ -690,7 +776,37 @@ impl<'a> Servo<'a> {
             }
             // The update: x = −μ J⁺ e.
             let eta = self.config.levenberg_marquardt;
+            let mut coefficient_update = [0.0; 2];
             let solution: Option<([f64; 6], f64)> = match stage {
+                _ if vignetting_on => {
+                    let (rows, j_lambda): (&[[f32; 6]], Option<&[f32]>) = match stage {
+                        Stage::Brightness => (brightness.interaction(), None),
+                        Stage::Pgm { .. } => {
+                            (pgm.interaction(), optimise_lambda.then(|| pgm.j_lambda()))
+                        }
+                    };
+                    self.rows9.clear();
+                    self.rows9.extend(rows.iter().enumerate().map(|(s, l)| {
+                        let j = j_lambda.map_or(0.0, |j| j[s]);
+                        [
+                            l[0],
+                            l[1],
+                            l[2],
+                            l[3],
+                            l[4],
+                            l[5],
+                            j,
+                            self.columns[0][s],
+                            self.columns[1][s],
+                        ]
+                    }));
+                    let (jtj, jte) =
+                        normal_equations::<9>(&self.rows9, &self.residuals, Some(&self.weights));
+                    solve(&jtj, &jte, eta).map(|x| {
+                        coefficient_update = [x[7], x[8]];
+                        ([x[0], x[1], x[2], x[3], x[4], x[5]], x[6])
+                    })
+                }
                 Stage::Pgm { .. } if optimise_lambda => {
                     self.rows7.clear();
                     self.rows7.extend(
@@ -747,6 +863,11 @@ impl<'a> Servo<'a> {
                 });
             };
             *pose = *pose * update;
+            if vignetting_on {
+                for (c, dc) in coefficients.iter_mut().zip(coefficient_update) {
+                    *c = (*c - gain * dc).clamp(-MAX_COEFFICIENT, MAX_COEFFICIENT);
+                }
+            }
             if optimise_lambda {
                 lambda = (lambda + lambda_dot)
                     .clamp(*pgm::LAMBDA_RANGE.start(), *pgm::LAMBDA_RANGE.end());

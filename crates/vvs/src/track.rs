@@ -39,6 +39,9 @@ pub struct Tracker<'a> {
     servo: Servo<'a>,
     method: Method,
     estimate: Isometry3,
+    /// The estimate before the last one, for the constant-velocity prediction.
+    previous: Option<Isometry3>,
+    constant_velocity: bool,
     lost: bool,
 }
 
@@ -54,8 +57,28 @@ impl<'a> Tracker<'a> {
             servo,
             method,
             estimate: initial,
+            previous: None,
+            constant_velocity: false,
             lost: false,
         })
+    }
+
+    /// Beyond the paper (off by default): start each alignment from a constant-velocity
+    /// prediction, the last motion between aligned frames repeated
+    /// (`estimate · (previous⁻¹ · estimate)`), instead of from the last estimate.
+    pub fn with_constant_velocity(mut self, on: bool) -> Self {
+        self.constant_velocity = on;
+        self
+    }
+
+    /// Where the next alignment starts.
+    pub fn prediction(&self) -> Isometry3 {
+        match self.previous {
+            Some(previous) if self.constant_velocity => {
+                self.estimate * (previous.inverse() * self.estimate)
+            }
+            _ => self.estimate,
+        }
     }
 
     /// The current estimate: the last aligned frame's `world_from_camera` (the initial
@@ -74,17 +97,22 @@ impl<'a> Tracker<'a> {
         self.method
     }
 
-    /// Align one frame from the current estimate, which becomes the result unless the
-    /// alignment diverged (then the track is lost). [`VvsError::TrackLost`] once lost.
+    /// Align one frame from the current estimate (or [`Tracker::prediction`]), which
+    /// becomes the result unless the alignment diverged (then the track is lost). [`VvsError::TrackLost`] once lost.
     pub fn align<D: AnyImage + Clone>(&mut self, picture: &D) -> Result<Outcome, VvsError> {
         if self.lost {
             return Err(VvsError::TrackLost);
         }
-        let outcome = self.servo.run(self.method, picture, self.estimate)?;
+        let outcome = self.servo.run(self.method, picture, self.prediction())?;
         if matches!(outcome.stop, StopReason::Diverged(_)) {
             self.lost = true;
         } else {
+            self.previous = Some(self.estimate);
             self.estimate = outcome.world_from_camera;
+            // The camera's vignetting does not change from frame to frame.
+            if let Some(c) = outcome.vignetting {
+                self.servo.set_vignetting_start(c);
+            }
         }
         Ok(outcome)
     }

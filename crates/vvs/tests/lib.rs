@@ -8,6 +8,7 @@ mod convergence;
 mod degenerate;
 mod global;
 mod localize;
+mod photometric;
 mod pipeline;
 mod pipeline_support;
 mod track;

@@ -156,3 +156,28 @@ fn lost_tracks_and_bad_input() {
         Err(VvsError::NonFinitePose)
     ));
 }
+
+/// The constant-velocity prediction repeats the last motion between aligned frames:
+/// on a steady motion it starts the next frame far closer than the last estimate.
+#[test]
+fn constant_velocity_predicts_a_steady_motion() {
+    let camera = fixture();
+    let truth = truth(7);
+    let mut servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let frames: Vec<_> = truth.iter().map(|p| servo.render(p).unwrap()).collect();
+    let mut tracker = Tracker::new(servo, Method::Rule2, truth[0])
+        .unwrap()
+        .with_constant_velocity(true);
+    assert_eq!(tracker.prediction(), truth[0], "nothing to extrapolate yet");
+    let first = tracker.align(&frames[0]).unwrap().world_from_camera;
+    assert_eq!(tracker.prediction(), first, "one estimate: no velocity yet");
+    let second = tracker.align(&frames[3]).unwrap().world_from_camera;
+    let predicted = tracker.prediction();
+    let expected = second * (first.inverse() * second);
+    let (dt, dr) = predicted.distance_to(&expected);
+    assert!(dt < 1e-12 && dr < 1e-12);
+    let (from_prediction, _) = predicted.distance_to(&truth[6]);
+    let (from_estimate, _) = second.distance_to(&truth[6]);
+    eprintln!("frame 6 starts {from_prediction:.4} m away (last estimate: {from_estimate:.4} m)");
+    assert!(from_prediction < from_estimate / 5.0);
+}
