@@ -82,34 +82,43 @@ pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
 
 /// Run the Fig. 3 protocol (or its quick subset) and check the result files; with
 /// `domain`, also the domain curve below the paper's offsets and the basin along each
-/// axis (`fixtures/protocol-fig3-domain.toml`, `fixtures/protocol-fig3-axes.toml`).
+/// axis (`fixtures/protocol-fig3-{domain,axes}[-quick].toml`), gathered with the
+/// paper's protocol into `results/domain[-quick]/`.
 pub fn fig3(quick: bool, extras: bool, domain: bool, build: Build) -> anyhow::Result<()> {
-    if domain {
-        let root = project_root();
-        for (protocol, out) in [
-            ("protocol-fig3-domain.toml", "fig3-domain"),
-            ("protocol-fig3-axes.toml", "fig3-axes"),
-        ] {
-            let protocol_path = root.join("fixtures").join(protocol);
-            let out = root.join("results").join(out);
-            run_protocol(&protocol_path, &out, false, build)?;
-            check(&protocol_path, &out, false, false, build)?;
-        }
-    }
     let root = project_root();
-    let (protocol_path, out) = if quick {
-        (
-            root.join("fixtures/protocol-fig3-quick.toml"),
-            root.join("results/fig3-quick"),
-        )
-    } else {
-        (
-            root.join("fixtures/protocol-fig3.toml"),
-            root.join("results/fig3"),
-        )
-    };
-    run_protocol(&protocol_path, &out, extras, build)?;
-    check(&protocol_path, &out, quick, extras, build)
+    let suffix = if quick { "-quick" } else { "" };
+    let fixture = |name: &str| root.join("fixtures").join(format!("protocol-{name}{suffix}.toml"));
+    let results = |name: &str| root.join("results").join(format!("{name}{suffix}"));
+    run_protocol(&fixture("fig3"), &results("fig3"), extras, build)?;
+    check(&fixture("fig3"), &results("fig3"), quick, extras, build)?;
+    if !domain {
+        return Ok(());
+    }
+    for name in ["fig3-domain", "fig3-axes"] {
+        run_protocol(&fixture(name), &results(name), false, build)?;
+        check(&fixture(name), &results(name), false, false, build)?;
+    }
+    let axes_protocol = fixture("fig3-axes");
+    let (paper, below, axes, out) = (
+        results("fig3"),
+        results("fig3-domain"),
+        results("fig3-axes"),
+        results("domain"),
+    );
+    bench_conv(
+        &[
+            "domain".as_ref(),
+            paper.as_os_str(),
+            below.as_os_str(),
+            "--axes-protocol".as_ref(),
+            axes_protocol.as_os_str(),
+            "--axes".as_ref(),
+            axes.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ],
+        build,
+    )
 }
 
 /// Run the global localisation protocols (method `global`, beyond the paper): the

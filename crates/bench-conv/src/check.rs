@@ -76,8 +76,78 @@ fn ensure_files<S: AsRef<Path>>(out: &Path, names: &[S]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The rows of an adaptive axes protocol: per method and axis, the scales run are the
+/// first ones of the protocol, each with every run along the axis, every scale but the
+/// last run has no failure, and the last one has a failure unless it is the largest.
+fn check_adaptive(
+    protocol: &Protocol,
+    records: &[crate::report::RunRecord],
+    methods: &[crate::protocol::MethodConfig],
+    extras: bool,
+) -> anyhow::Result<()> {
+    let all = protocol.runs(extras)?;
+    ensure!(
+        records.windows(2).all(|w| w[0].run_id < w[1].run_id),
+        "run ids are not increasing"
+    );
+    for r in records {
+        let spec = all
+            .get(r.run_id)
+            .with_context(|| format!("run id {} is not a run of the protocol", r.run_id))?;
+        ensure!(
+            methods[spec.method].name == r.config
+                && (spec.desired, spec.initial) == (r.desired, r.initial)
+                && protocol.offsets.scales[spec.scale] == r.offset_scale,
+            "run {}: its row does not match the protocol's run of that id",
+            r.run_id
+        );
+        ensure!(
+            r.success == (r.final_position_error_m < protocol.success_threshold_m),
+            "run {}: success flag inconsistent with its error",
+            r.run_id
+        );
+    }
+    for m in methods {
+        for axis in 0..6 {
+            let per_scale = protocol.desired.len()
+                * protocol
+                    .initial_indices()
+                    .iter()
+                    .filter(|&&i| Protocol::axis_of(i) == axis)
+                    .count();
+            let mut open = true;
+            for &scale in &protocol.offsets.scales {
+                let runs: Vec<_> = records
+                    .iter()
+                    .filter(|r| {
+                        r.config == m.name
+                            && Protocol::axis_of(r.initial) == axis
+                            && r.offset_scale == scale
+                    })
+                    .collect();
+                if !open {
+                    ensure!(
+                        runs.is_empty(),
+                        "{} axis {axis}: runs at scale {scale}, beyond a failed scale",
+                        m.name
+                    );
+                    continue;
+                }
+                ensure!(
+                    runs.len() == per_scale,
+                    "{} axis {axis} scale {scale}: {} runs, expected {per_scale}",
+                    m.name,
+                    runs.len()
+                );
+                open = runs.iter().all(|r| r.success);
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The result files exist, every method has one row per (desired, scale, initial)
-/// pose, and in quick mode: PoVS fails from 8 m, Rule2 succeeds at least as often as
+/// pose (for an adaptive protocol, the runs its basins needed), and in quick mode: PoVS fails from 8 m, Rule2 succeeds at least as often as
 /// Rule0.
 pub fn check_protocol(
     protocol_path: &Path,
@@ -92,6 +162,9 @@ pub fn check_protocol(
     }
     let records = read_csv(&out.join("runs.csv"))?;
     let methods = protocol.method_configs(extras)?;
+    if protocol.offsets.adaptive {
+        return check_adaptive(&protocol, &records, &methods, extras);
+    }
     let per_method =
         protocol.desired.len() * protocol.offsets.scales.len() * protocol.initial_indices().len();
     ensure!(

@@ -21,6 +21,7 @@
 //! # sampling = "corners"              # corners (64, the paper's), axes (12), uniform (64)
 //! # scales = [0.25, 0.5, 0.75, 1.0]   # every initial pose at each scale of the offsets
 //! # seed = 1                          # of the uniform draws
+//! # adaptive = true                   # axes only: stop an axis beyond its basin
 //!
 //! # [prior]                           # the box of method "global" (default: [offsets])
 //! # translation_m = [8.0, 2.0, 1.5]
@@ -47,7 +48,10 @@
 //!   `k` of `(tX, tY, tZ, θwX, θwY, θwZ)` where bit `k` of `i` is set, the magnitude of
 //!   `[offsets]` for every component;
 //! * `axes`: initial pose `i` (0–11) offsets component `i / 2` alone, positive for even
-//!   `i`, negative for odd (the basin along each axis);
+//!   `i`, negative for odd (the basin along each axis). With `adaptive = true` the
+//!   scales run in increasing order and a method stops along an axis after the first
+//!   scale at which one of its runs along that axis fails: the basin is the same as
+//!   with every run, without the runs beyond it (such a protocol is not sharded);
 //! * `uniform`: initial pose `i` (0–63) draws every component uniformly within
 //!   `±[offsets]` (seeded by `seed`, the desired pose and `i`): starts anywhere inside
 //!   the box rather than at its corners.
@@ -203,6 +207,10 @@ pub struct Offsets {
     /// Seed of the `uniform` draws.
     #[serde(default)]
     pub seed: u64,
+    /// With `axes`: run the scales in increasing order and stop a method along an axis
+    /// after the first scale at which one of its runs along it fails (module docs).
+    #[serde(default)]
+    pub adaptive: bool,
 }
 
 fn default_scales() -> Vec<f64> {
@@ -363,6 +371,14 @@ impl Protocol {
         if scales.windows(2).any(|w| w[0] == w[1]) {
             bail!("[offsets] scales lists a scale twice");
         }
+        if self.offsets.adaptive {
+            if self.offsets.sampling != Sampling::Axes {
+                bail!("[offsets] adaptive = true needs sampling = \"axes\"");
+            }
+            if scales != self.offsets.scales {
+                bail!("[offsets] adaptive = true needs the scales in increasing order");
+            }
+        }
         if let Some(prior) = &self.prior {
             prior.validate()?;
         }
@@ -409,7 +425,7 @@ impl Protocol {
             }
             Sampling::Axes => std::array::from_fn(|k| {
                 let sign = if index % 2 == 1 { -1.0 } else { 1.0 };
-                if k == index / 2 { sign * mag[k] } else { 0.0 }
+                if k == Self::axis_of(index) { sign * mag[k] } else { 0.0 }
             }),
             Sampling::Uniform => {
                 let mut rng = splat::rng::SplitMix64::new(self.offsets.seed)
@@ -490,7 +506,14 @@ impl Protocol {
             .unwrap_or_else(|| (0..self.offsets.sampling.count()).collect())
     }
 
-    /// Every run, in a stable order: desired, scale, initial, method.
+    /// The axis (0–5: `tX, tY, tZ, θwX, θwY, θwZ`) that initial pose `initial` offsets,
+    /// for `axes` sampling.
+    pub fn axis_of(initial: usize) -> usize {
+        initial / 2
+    }
+
+    /// Every run, in a stable order: desired, scale, initial, method (for an adaptive
+    /// protocol, every run it may need; see [`Offsets::adaptive`]).
     pub fn runs(&self, extras: bool) -> anyhow::Result<Vec<RunSpec>> {
         let methods = self.method_configs(extras)?.len();
         let mut runs = Vec::new();

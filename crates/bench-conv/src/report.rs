@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{Context, bail};
+use anyhow::{Context, bail, ensure};
 use vvs::{Method, StopReason};
 
 /// One run's result (a CSV row).
@@ -778,6 +778,59 @@ fn draw_domain<DB: plotters::prelude::DrawingBackend>(
     crate::plot::finish(&mut chart, &root)
 }
 
+/// The convergence domain from finished runs, into `out` (created): the curve of every
+/// method over the runs of `curve` (each element the rows of one results folder;
+/// `domain.csv`, `domain.png`, `domain.svg`) and, from an axes protocol and its rows,
+/// the basin along each axis; both as Markdown in `domain.md`, which is returned.
+pub fn write_domain(
+    out: &Path,
+    curve: &[Vec<RunRecord>],
+    axes: Option<&(crate::protocol::Protocol, Vec<RunRecord>)>,
+) -> anyhow::Result<String> {
+    let records: Vec<RunRecord> = curve.iter().flatten().cloned().collect();
+    ensure!(!records.is_empty(), "the results folders hold no run");
+    let points = domain(&records);
+    begin_results(out)?;
+    let mut text = String::from(
+        "# The convergence domain\n\nSuccess (final position error below the protocol's \
+         threshold) against the scale s of every offset of the protocol (s = 1: the \
+         paper's offsets); the runs behind each cell are given beside its rate.\n\n",
+    );
+    text.push_str(&domain_markdown(&points));
+    write_domain_csv(&out.join("domain.csv"), &points)?;
+    plot_domain(&points, &out.join("domain.png"), &out.join("domain.svg"))?;
+    if let Some((protocol, rows)) = axes {
+        ensure!(
+            protocol.offsets.sampling == crate::protocol::Sampling::Axes,
+            "the axes protocol `{}` does not sample along the axes (sampling = \"axes\")",
+            protocol.name
+        );
+        let (t, r) = (protocol.offsets.translation_m, protocol.offsets.rotation_deg);
+        let _ = write!(
+            text,
+            "\n## The basin along each axis alone\n\nProtocol `{}`: one offset at a time, \
+             both signs, every desired pose, at scales {:?} of the magnitudes below; the \
+             largest offset from which every run along the axis converged, at that and \
+             every smaller scale ({} runs{}).\n\n",
+            protocol.name,
+            protocol.offsets.scales,
+            rows.len(),
+            if protocol.offsets.adaptive {
+                "; adaptive: a method stops along an axis after its first failing scale"
+            } else {
+                ""
+            }
+        );
+        text.push_str(&axis_basins_markdown(
+            &axis_basins(rows),
+            [t[0], t[1], t[2], r[0], r[1], r[2]],
+        ));
+    }
+    write_atomically(&out.join("domain.md"), text.as_bytes())?;
+    finish_results(out)?;
+    Ok(text)
+}
+
 /// The basin along each axis (protocols with `sampling = "axes"`): per method and
 /// axis, the largest scale `s` such that every run along that axis (both signs, every
 /// desired pose) converged at `s` and at every smaller scale run (a scale with no run
@@ -796,7 +849,9 @@ pub fn axis_basins(records: &[RunRecord]) -> Vec<(String, [f64; 6])> {
                 let mut largest = 0.0;
                 for &scale in &scales {
                     let mut runs = records.iter().filter(|r| {
-                        r.config == method && r.initial / 2 == axis && r.offset_scale == scale
+                        r.config == method
+                            && crate::protocol::Protocol::axis_of(r.initial) == axis
+                            && r.offset_scale == scale
                     });
                     let mut any = false;
                     let all = runs.all(|r| {

@@ -9,7 +9,7 @@ use splat::PointCloud;
 use vvs::{Method, Servo, VvsConfig};
 
 use crate::progress::Progress;
-use crate::protocol::{Protocol, RunSpec};
+use crate::protocol::{MethodConfig, Protocol, RunSpec};
 use crate::report::RunRecord;
 
 /// Load or generate the protocol's cloud.
@@ -46,9 +46,15 @@ impl Shard {
     }
 }
 
-/// Refuse a shard that holds no run (more shards than poses), before any work.
+/// Refuse a shard that holds no run (more shards than poses), or any shard of an
+/// adaptive protocol, before any work.
 pub fn check_shard(protocol: &Protocol, extras: bool, shard: Option<Shard>) -> anyhow::Result<()> {
     let Some(s) = shard else { return Ok(()) };
+    anyhow::ensure!(
+        !protocol.offsets.adaptive,
+        "an adaptive protocol ([offsets] adaptive = true) cannot be sharded: which runs it \
+         needs at a scale depends on the runs at the smaller ones (run it whole)"
+    );
     let methods = protocol.method_configs(extras)?.len().max(1);
     let poses = protocol.runs(extras)?.len() / methods;
     anyhow::ensure!(
@@ -105,87 +111,174 @@ pub fn run_protocol(
     let desired_images: Vec<frame::Frame> = (0..protocol.desired.len())
         .map(|k| Ok(renderer.render(&protocol.desired_pose(k)?)?))
         .collect::<anyhow::Result<_>>()?;
-
-    // Jobs: the runs of one pose, one per method, except that Rule1 and Rule2 with the
-    // same settings form one job, which runs their common step 1 once.
-    let shares_step1 = |m: usize| matches!(methods[m].method, Method::Rule1 | Method::Rule2);
-    let mut jobs: Vec<Vec<RunSpec>> = Vec::new();
-    for r in &runs {
-        let partner = jobs.iter_mut().rev().take(methods.len()).find(|job| {
-            let first = job[0];
-            (first.desired, first.scale, first.initial) == (r.desired, r.scale, r.initial)
-                && shares_step1(first.method)
-                && shares_step1(r.method)
-                && methods[first.method].config == methods[r.method].config
-        });
-        match partner {
-            Some(job) => job.push(*r),
-            None => jobs.push(vec![*r]),
-        }
-    }
-    // Runs in parallel, each image on one thread (unless there is a single job).
-    let parallel_images = jobs.len() < rayon::current_num_threads();
-
-    let bar = Progress::new(runs.len() as u64, "runs");
-    let successes = Mutex::new(0usize);
-    let records: Vec<Vec<RunRecord>> = jobs
-        .par_iter()
-        .map_init(
-            || None::<(usize, Servo<'_>)>,
-            |servo_slot, job| -> anyhow::Result<Vec<RunRecord>> {
-                let first = &methods[job[0].method];
-                // One optimiser per worker, rebuilt when the settings change.
-                if servo_slot
-                    .as_ref()
-                    .is_none_or(|(m, _)| methods[*m].config != first.config)
-                {
-                    let config = VvsConfig {
-                        parallel: parallel_images,
-                        ..first.config.clone()
-                    };
-                    *servo_slot = Some((job[0].method, Servo::new(cloud, &camera, config)?));
-                }
-                let servo = &mut servo_slot.as_mut().expect("set above").1;
-                let (desired, initial) = (job[0].desired, job[0].initial);
-                let offset_scale = protocol.offsets.scales[job[0].scale];
-                let desired_pose = protocol.desired_pose(desired)?;
-                let initial_pose = protocol.initial_pose(desired, initial, offset_scale)?;
-                let job_methods: Vec<Method> =
-                    job.iter().map(|r| methods[r.method].method).collect();
-                let outcomes =
-                    servo.run_methods(&job_methods, &desired_images[desired], initial_pose)?;
-                let mut records = Vec::with_capacity(job.len());
-                for (spec, outcome) in job.iter().zip(outcomes) {
-                    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);
-                    let success = dt < protocol.success_threshold_m;
-                    records.push(RunRecord {
-                        run_id: spec.id,
-                        scene: scene_name.to_string(),
-                        desired,
-                        offset_scale,
-                        initial,
-                        config: methods[spec.method].name.clone(),
-                        method: methods[spec.method].method,
-                        final_position_error_m: dt,
-                        final_rotation_error_deg: dr.to_degrees(),
-                        iterations_step1: outcome.iterations[0],
-                        iterations_step2: outcome.iterations[1],
-                        stop: outcome.stop,
-                        lambda: outcome.lambda,
-                        cost: outcome.cost,
-                        wall_time_s: outcome.time_s,
-                        success,
-                    });
-                }
-                let mut successes = successes.lock().expect("not poisoned");
-                *successes += records.iter().filter(|r| r.success).count();
-                bar.inc(job.len() as u64, &format!("{successes} successes"));
-                Ok(records)
-            },
-        )
-        .collect::<anyhow::Result<_>>()?;
-    let mut records: Vec<RunRecord> = records.into_iter().flatten().collect();
-    bar.finish();
+    let context = Context {
+        protocol,
+        cloud,
+        camera: &camera,
+        methods: &methods,
+        scene_name,
+        desired_images: &desired_images,
+        bar: Progress::new(runs.len() as u64, "runs"),
+        successes: Mutex::new(0),
+    };
+    let mut records = if protocol.offsets.adaptive {
+        run_adaptive(
+            &runs,
+            methods.len(),
+            |round| context.run(round),
+            |beyond| context.bar.inc(beyond as u64, "(runs beyond a basin skipped)"),
+        )?
+    } else {
+        context.run(&runs)?
+    };
+    context.bar.finish();
     records.sort_by_key(|r| r.run_id);
     Ok(records)
+}
+
+/// The runs of an adaptive axes protocol ([`crate::protocol::Offsets::adaptive`]):
+/// the scales in increasing order (`runs` holds scale indices in that order), each
+/// (method, axis) stopped after its first scale with a failed run. `run` runs one
+/// round (one record per run, in order); `skipped` hears how many runs of `runs` each
+/// round made unnecessary. Returns the records of every round.
+pub fn run_adaptive(
+    runs: &[RunSpec],
+    method_count: usize,
+    mut run: impl FnMut(&[RunSpec]) -> anyhow::Result<Vec<RunRecord>>,
+    mut skipped: impl FnMut(usize),
+) -> anyhow::Result<Vec<RunRecord>> {
+    let axis = |r: &RunSpec| Protocol::axis_of(r.initial);
+    // Whether each (method, axis) is still inside its basin.
+    let mut inside = vec![[true; 6]; method_count];
+    let mut records = Vec::new();
+    let scales = runs.iter().map(|r| r.scale + 1).max().unwrap_or(0);
+    for scale in 0..scales {
+        let before = inside.clone();
+        let round: Vec<RunSpec> = runs
+            .iter()
+            .filter(|r| r.scale == scale && inside[r.method][axis(r)])
+            .copied()
+            .collect();
+        let done = run(&round)?;
+        anyhow::ensure!(done.len() == round.len(), "a round lost runs");
+        for (spec, record) in round.iter().zip(&done) {
+            if !record.success {
+                inside[spec.method][axis(spec)] = false;
+            }
+        }
+        records.extend(done);
+        // The runs beyond a basin found in this round will not be needed.
+        let beyond = runs
+            .iter()
+            .filter(|r| r.scale > scale && before[r.method][axis(r)] && !inside[r.method][axis(r)])
+            .count();
+        if beyond > 0 {
+            skipped(beyond);
+        }
+    }
+    Ok(records)
+}
+
+/// What every run of a protocol shares.
+struct Context<'a> {
+    protocol: &'a Protocol,
+    cloud: &'a PointCloud,
+    camera: &'a ucm::Camera,
+    methods: &'a [MethodConfig],
+    scene_name: &'a str,
+    desired_images: &'a [frame::Frame],
+    bar: Progress,
+    successes: Mutex<usize>,
+}
+
+impl Context<'_> {
+    /// Run `runs` in parallel; one record per run, in the order of `runs`.
+    fn run(&self, runs: &[RunSpec]) -> anyhow::Result<Vec<RunRecord>> {
+        let Self {
+            protocol,
+            cloud,
+            camera,
+            methods,
+            scene_name,
+            desired_images,
+            ..
+        } = *self;
+        // Jobs: the runs of one pose, one per method, except that Rule1 and Rule2 with the
+        // same settings form one job, which runs their common step 1 once.
+        let shares_step1 = |m: usize| matches!(methods[m].method, Method::Rule1 | Method::Rule2);
+        let mut jobs: Vec<Vec<RunSpec>> = Vec::new();
+        for r in runs {
+            let partner = jobs.iter_mut().rev().take(methods.len()).find(|job| {
+                let first = job[0];
+                (first.desired, first.scale, first.initial) == (r.desired, r.scale, r.initial)
+                    && shares_step1(first.method)
+                    && shares_step1(r.method)
+                    && methods[first.method].config == methods[r.method].config
+            });
+            match partner {
+                Some(job) => job.push(*r),
+                None => jobs.push(vec![*r]),
+            }
+        }
+        // Runs in parallel, each image on one thread (unless there is a single job).
+        let parallel_images = jobs.len() < rayon::current_num_threads();
+
+        let records: Vec<Vec<RunRecord>> = jobs
+            .par_iter()
+            .map_init(
+                || None::<(usize, Servo<'_>)>,
+                |servo_slot, job| -> anyhow::Result<Vec<RunRecord>> {
+                    let first = &methods[job[0].method];
+                    // One optimiser per worker, rebuilt when the settings change.
+                    if servo_slot
+                        .as_ref()
+                        .is_none_or(|(m, _)| methods[*m].config != first.config)
+                    {
+                        let config = VvsConfig {
+                            parallel: parallel_images,
+                            ..first.config.clone()
+                        };
+                        *servo_slot = Some((job[0].method, Servo::new(cloud, camera, config)?));
+                    }
+                    let servo = &mut servo_slot.as_mut().expect("set above").1;
+                    let (desired, initial) = (job[0].desired, job[0].initial);
+                    let offset_scale = protocol.offsets.scales[job[0].scale];
+                    let desired_pose = protocol.desired_pose(desired)?;
+                    let initial_pose = protocol.initial_pose(desired, initial, offset_scale)?;
+                    let job_methods: Vec<Method> =
+                        job.iter().map(|r| methods[r.method].method).collect();
+                    let outcomes =
+                        servo.run_methods(&job_methods, &desired_images[desired], initial_pose)?;
+                    let mut records = Vec::with_capacity(job.len());
+                    for (spec, outcome) in job.iter().zip(outcomes) {
+                        let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);
+                        let success = dt < protocol.success_threshold_m;
+                        records.push(RunRecord {
+                            run_id: spec.id,
+                            scene: scene_name.to_string(),
+                            desired,
+                            offset_scale,
+                            initial,
+                            config: methods[spec.method].name.clone(),
+                            method: methods[spec.method].method,
+                            final_position_error_m: dt,
+                            final_rotation_error_deg: dr.to_degrees(),
+                            iterations_step1: outcome.iterations[0],
+                            iterations_step2: outcome.iterations[1],
+                            stop: outcome.stop,
+                            lambda: outcome.lambda,
+                            cost: outcome.cost,
+                            wall_time_s: outcome.time_s,
+                            success,
+                        });
+                    }
+                    let mut successes = self.successes.lock().expect("not poisoned");
+                    *successes += records.iter().filter(|r| r.success).count();
+                    self.bar.inc(job.len() as u64, &format!("{successes} successes"));
+                    Ok(records)
+                },
+            )
+            .collect::<anyhow::Result<_>>()?;
+        Ok(records.into_iter().flatten().collect())
+    }
 }

@@ -62,6 +62,8 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
         "protocol-global-quick.toml",
         "protocol-fig3-domain.toml",
         "protocol-fig3-axes.toml",
+        "protocol-fig3-domain-quick.toml",
+        "protocol-fig3-axes-quick.toml",
         "ablations/baseline.toml",
         "ablations/no-clutter.toml",
         "ablations/plain-facades.toml",
@@ -508,6 +510,97 @@ fn domain_curve_and_axis_basins_count_the_records() {
     // An axis with no run at a scale ends its basin there (no success from nothing).
     records.retain(|r| !(r.initial / 2 == 1 && r.offset_scale == 1.0));
     assert_eq!(axis_basins(&records)[0].1[1], 0.5);
+}
+
+/// An adaptive axes protocol runs each (method, axis) up to its first failing scale and
+/// no further, finds the basins the whole ladder finds, and refuses to be sharded; the
+/// check accepts its rows and refuses rows beyond a basin.
+#[test]
+fn adaptive_axes_stop_beyond_each_basin() {
+    use bench_conv::report::{RunRecord, axis_basins};
+    use bench_conv::run::{Shard, check_shard, run_adaptive};
+    let protocol = Protocol::load(&root().join("fixtures/protocol-fig3-axes.toml")).unwrap();
+    assert!(protocol.offsets.adaptive);
+    let err = check_shard(&protocol, false, Some(Shard { index: 0, count: 2 })).unwrap_err();
+    assert!(err.to_string().contains("cannot be sharded"), "{err}");
+    let methods = protocol.method_configs(false).unwrap();
+    let runs = protocol.runs(false).unwrap();
+    // A made-up outcome: method m converges along axis a up to scale index m + a - 3
+    // (none for small sums), except desired pose 3 on the negative side of axis 2,
+    // which fails from the second scale.
+    let converges = |r: &bench_conv::protocol::RunSpec| {
+        let axis = Protocol::axis_of(r.initial);
+        let limit = r.method as isize + axis as isize - 3;
+        let exception = axis == 2 && r.initial % 2 == 1 && r.desired == 3 && r.scale >= 1;
+        (r.scale as isize) <= limit && !exception
+    };
+    let record = |r: &bench_conv::protocol::RunSpec| {
+        let success = converges(r);
+        RunRecord {
+            run_id: r.id,
+            scene: "s".into(),
+            desired: r.desired,
+            offset_scale: protocol.offsets.scales[r.scale],
+            initial: r.initial,
+            config: methods[r.method].name.clone(),
+            method: methods[r.method].method,
+            final_position_error_m: if success { 0.001 } else { 3.0 },
+            final_rotation_error_deg: 0.0,
+            iterations_step1: 1,
+            iterations_step2: 1,
+            stop: vvs::StopReason::Converged,
+            lambda: 1.0,
+            cost: 0.0,
+            wall_time_s: 0.0,
+            success,
+        }
+    };
+    let mut skipped = 0;
+    let mut rounds = 0;
+    let adaptive = run_adaptive(
+        &runs,
+        methods.len(),
+        |round| {
+            rounds += 1;
+            Ok(round.iter().map(record).collect())
+        },
+        |n| skipped += n,
+    )
+    .unwrap();
+    assert_eq!(rounds, protocol.offsets.scales.len());
+    assert_eq!(adaptive.len() + skipped, runs.len(), "every run is run or skipped");
+    assert!(adaptive.len() < runs.len() / 2, "{} runs", adaptive.len());
+    let mut every: Vec<RunRecord> = runs.iter().map(record).collect();
+    let mut adaptive_sorted = adaptive.clone();
+    adaptive_sorted.sort_by_key(|r| r.run_id);
+    assert_eq!(axis_basins(&adaptive_sorted), axis_basins(&every));
+    // The basins are the made-up ones (rule0/convolved is method 1, axis 4: scale index
+    // 2, 0.75; axis 2 of the last method stops at its exception).
+    let basins = axis_basins(&adaptive_sorted);
+    let find = |name: &str| basins.iter().find(|b| b.0 == name).unwrap().1;
+    assert_eq!(find("rule0/convolved")[4], 0.75);
+    assert_eq!(find("rule2/paper")[2], 0.25);
+    // The check: the adaptive rows pass, the whole ladder's rows do not (runs beyond a
+    // failed scale), nor rows with a run missing.
+    let dir = temp("adaptive");
+    let write = |rows: &[RunRecord]| {
+        bench_conv::report::write_csv(&dir.join("runs.csv"), rows).unwrap();
+        for name in ["summary.md", "cdf.png", "cdf.svg", "domain.csv", "domain.png", "domain.svg"] {
+            std::fs::write(dir.join(name), "x").unwrap();
+        }
+        bench_conv::check::check_protocol(
+            &root().join("fixtures/protocol-fig3-axes.toml"),
+            &dir,
+            false,
+            false,
+        )
+    };
+    write(&adaptive_sorted).unwrap();
+    let err = write(&every).unwrap_err();
+    assert!(err.to_string().contains("beyond a failed scale"), "{err}");
+    every = adaptive_sorted.clone();
+    every.remove(3);
+    assert!(write(&every).is_err());
 }
 
 /// Pixel counts (`--crop`) are non-negative integers that fit in u32, nothing else.

@@ -53,6 +53,23 @@ enum Command {
         #[arg(long, default_value_t = 0.02, allow_negative_numbers = true)]
         threshold_m: f64,
     },
+    /// The convergence domain from finished protocol runs: success against the offset
+    /// scale of every method (domain.csv, domain.png/svg) and, from an axes protocol,
+    /// the basin along each axis, together in domain.md.
+    Domain {
+        /// Results folders (each with its runs.csv) whose runs make the curve.
+        #[arg(required = true)]
+        curve: Vec<PathBuf>,
+        /// An axes protocol file (`sampling = "axes"`) …
+        #[arg(long, requires = "axes")]
+        axes_protocol: Option<PathBuf>,
+        /// … and the results folder of its run.
+        #[arg(long, requires = "axes_protocol")]
+        axes: Option<PathBuf>,
+        /// Results folder (created).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// The PGM of a real catadioptric image at several λ (the paper's Fig. 1).
     PgmImage {
         /// The image (JPEG, PNG…).
@@ -233,7 +250,12 @@ fn main() -> anyhow::Result<()> {
             let manifest = bench_conv::report::RunManifest {
                 protocol: protocol.name.clone(),
                 extras,
-                total_runs: protocol.runs(extras)?.len(),
+                // An adaptive protocol needs only the runs it ran.
+                total_runs: if protocol.offsets.adaptive {
+                    records.len()
+                } else {
+                    protocol.runs(extras)?.len()
+                },
                 shard: shard.map(|s| [s.index, s.count]),
                 runs: records.len(),
             };
@@ -296,6 +318,27 @@ fn main() -> anyhow::Result<()> {
             {
                 println!("wrote {}", path.display());
             }
+        }
+        Command::Domain {
+            curve,
+            axes_protocol,
+            axes,
+            out,
+        } => {
+            let curve = curve
+                .iter()
+                .map(|dir| bench_conv::report::read_csv(&dir.join("runs.csv")))
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let axes = match (axes_protocol, axes) {
+                (Some(protocol), Some(dir)) => Some((
+                    bench_conv::protocol::Protocol::load(&protocol)?,
+                    bench_conv::report::read_csv(&dir.join("runs.csv"))?,
+                )),
+                _ => None,
+            };
+            let text = bench_conv::report::write_domain(&out, &curve, axes.as_ref())?;
+            println!("{text}");
+            println!("results in {}", out.display());
         }
         Command::Merge {
             csv,
