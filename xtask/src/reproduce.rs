@@ -87,7 +87,10 @@ pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
 pub fn fig3(quick: bool, extras: bool, domain: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
     let suffix = if quick { "-quick" } else { "" };
-    let fixture = |name: &str| root.join("fixtures").join(format!("protocol-{name}{suffix}.toml"));
+    let fixture = |name: &str| {
+        root.join("fixtures")
+            .join(format!("protocol-{name}{suffix}.toml"))
+    };
     let results = |name: &str| root.join("results").join(format!("{name}{suffix}"));
     run_protocol(&fixture("fig3"), &results("fig3"), extras, build)?;
     check(&fixture("fig3"), &results("fig3"), quick, extras, build)?;

@@ -425,7 +425,11 @@ impl Protocol {
             }
             Sampling::Axes => std::array::from_fn(|k| {
                 let sign = if index % 2 == 1 { -1.0 } else { 1.0 };
-                if k == Self::axis_of(index) { sign * mag[k] } else { 0.0 }
+                if k == Self::axis_of(index) {
+                    sign * mag[k]
+                } else {
+                    0.0
+                }
             }),
             Sampling::Uniform => {
                 let mut rng = splat::rng::SplitMix64::new(self.offsets.seed)

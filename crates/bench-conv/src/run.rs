@@ -3,7 +3,7 @@
 
 use std::sync::Mutex;
 
-use anyhow::Context;
+use anyhow::Context as _;
 use rayon::prelude::*;
 use splat::PointCloud;
 use vvs::{Method, Servo, VvsConfig};
@@ -111,7 +111,7 @@ pub fn run_protocol(
     let desired_images: Vec<frame::Frame> = (0..protocol.desired.len())
         .map(|k| Ok(renderer.render(&protocol.desired_pose(k)?)?))
         .collect::<anyhow::Result<_>>()?;
-    let context = Context {
+    let context = Shared {
         protocol,
         cloud,
         camera: &camera,
@@ -126,7 +126,11 @@ pub fn run_protocol(
             &runs,
             methods.len(),
             |round| context.run(round),
-            |beyond| context.bar.inc(beyond as u64, "(runs beyond a basin skipped)"),
+            |beyond| {
+                context
+                    .bar
+                    .inc(beyond as u64, "(runs beyond a basin skipped)")
+            },
         )?
     } else {
         context.run(&runs)?
@@ -141,6 +145,9 @@ pub fn run_protocol(
 /// (method, axis) stopped after its first scale with a failed run. `run` runs one
 /// round (one record per run, in order); `skipped` hears how many runs of `runs` each
 /// round made unnecessary. Returns the records of every round.
+///
+/// `run` returns one record per run of its round, in any order (each is matched to its
+/// run by `run_id`).
 pub fn run_adaptive(
     runs: &[RunSpec],
     method_count: usize,
@@ -161,7 +168,11 @@ pub fn run_adaptive(
             .collect();
         let done = run(&round)?;
         anyhow::ensure!(done.len() == round.len(), "a round lost runs");
-        for (spec, record) in round.iter().zip(&done) {
+        for record in &done {
+            let spec = round
+                .iter()
+                .find(|r| r.id == record.run_id)
+                .context("a round returned a run it was not given")?;
             if !record.success {
                 inside[spec.method][axis(spec)] = false;
             }
@@ -180,7 +191,7 @@ pub fn run_adaptive(
 }
 
 /// What every run of a protocol shares.
-struct Context<'a> {
+struct Shared<'a> {
     protocol: &'a Protocol,
     cloud: &'a PointCloud,
     camera: &'a ucm::Camera,
@@ -191,8 +202,9 @@ struct Context<'a> {
     successes: Mutex<usize>,
 }
 
-impl Context<'_> {
-    /// Run `runs` in parallel; one record per run, in the order of `runs`.
+impl Shared<'_> {
+    /// Run `runs` in parallel; one record per run (Rule1 and Rule2 of a pose next to
+    /// each other).
     fn run(&self, runs: &[RunSpec]) -> anyhow::Result<Vec<RunRecord>> {
         let Self {
             protocol,
@@ -226,21 +238,26 @@ impl Context<'_> {
         let records: Vec<Vec<RunRecord>> = jobs
             .par_iter()
             .map_init(
-                || None::<(usize, Servo<'_>)>,
-                |servo_slot, job| -> anyhow::Result<Vec<RunRecord>> {
+                Vec::<(usize, Servo<'_>)>::new,
+                |servos, job| -> anyhow::Result<Vec<RunRecord>> {
                     let first = &methods[job[0].method];
-                    // One optimiser per worker, rebuilt when the settings change.
-                    if servo_slot
-                        .as_ref()
-                        .is_none_or(|(m, _)| methods[*m].config != first.config)
+                    // One optimiser per worker and setting, built once (a run starts
+                    // afresh from its initial pose whatever the optimiser ran before).
+                    let slot = match servos
+                        .iter()
+                        .position(|(m, _)| methods[*m].config == first.config)
                     {
-                        let config = VvsConfig {
-                            parallel: parallel_images,
-                            ..first.config.clone()
-                        };
-                        *servo_slot = Some((job[0].method, Servo::new(cloud, camera, config)?));
-                    }
-                    let servo = &mut servo_slot.as_mut().expect("set above").1;
+                        Some(slot) => slot,
+                        None => {
+                            let config = VvsConfig {
+                                parallel: parallel_images,
+                                ..first.config.clone()
+                            };
+                            servos.push((job[0].method, Servo::new(cloud, camera, config)?));
+                            servos.len() - 1
+                        }
+                    };
+                    let servo = &mut servos[slot].1;
                     let (desired, initial) = (job[0].desired, job[0].initial);
                     let offset_scale = protocol.offsets.scales[job[0].scale];
                     let desired_pose = protocol.desired_pose(desired)?;
@@ -274,7 +291,8 @@ impl Context<'_> {
                     }
                     let mut successes = self.successes.lock().expect("not poisoned");
                     *successes += records.iter().filter(|r| r.success).count();
-                    self.bar.inc(job.len() as u64, &format!("{successes} successes"));
+                    self.bar
+                        .inc(job.len() as u64, &format!("{successes} successes"));
                     Ok(records)
                 },
             )

@@ -169,7 +169,7 @@ fn write_results(
     records: &[bench_conv::report::RunRecord],
     threshold_m: f64,
     wall_time_s: Option<f64>,
-    axes: Option<[f64; 6]>,
+    axes: Option<([f64; 6], f64)>,
     manifest: Option<&bench_conv::report::RunManifest>,
 ) -> anyhow::Result<()> {
     use bench_conv::report;
@@ -199,7 +199,7 @@ fn write_results(
         report::write_domain_csv(&out.join("domain.csv"), &domain)?;
         report::plot_domain(&domain, &out.join("domain.png"), &out.join("domain.svg"))?;
     }
-    if let Some(magnitudes) = axes {
+    if let Some((magnitudes, top_scale)) = axes {
         summary.push_str(
             "
 ## Basin along each axis alone
@@ -209,6 +209,7 @@ The largest offset of those run from which every run along the axis (both signs,
         summary.push_str(&report::axis_basins_markdown(
             &report::axis_basins(records),
             magnitudes,
+            top_scale,
         ));
     }
     report::write_atomically(&out.join("summary.md"), summary.as_bytes())?;
@@ -271,7 +272,8 @@ fn main() -> anyhow::Result<()> {
                         protocol.offsets.translation_m,
                         protocol.offsets.rotation_deg,
                     );
-                    [t[0], t[1], t[2], r[0], r[1], r[2]]
+                    let top = protocol.offsets.scales.iter().copied().fold(0.0, f64::max);
+                    ([t[0], t[1], t[2], r[0], r[1], r[2]], top)
                 }),
                 Some(&manifest),
             )?;
