@@ -46,11 +46,14 @@ commands:
   reproduce-fig4 [--quick] [--portable]
                        tracking by successive alignments (§4, Fig. 4): a shaken sequence
                        through the synthetic city tracked by PoT and PGMoT with 1 frame in
-                       N, fixtures/sequence-fig4.toml (--quick: fixtures/sequence-fig4-quick.toml).
-                       Results (frames.csv, summary.md, plots, overlays) in results/fig4*/,
-                       checked for consistency.
+                       N, fixtures/sequence-fig4.toml; beyond the paper the same tracked
+                       with the vignetting estimated and a constant-velocity prediction
+                       (sequence-fig4-improved.toml), and over 112 m through two streets
+                       (sequence-long.toml); --quick: their CI subsets (*-quick*.toml).
+                       Results (frames.csv, summary.md, plots, overlays) in results/fig4*/
+                       and results/long*/, checked for consistency.
 
-  Both build bench-conv in release mode for this machine's instruction set
+  All build bench-conv in release mode for this machine's instruction set
   (-C target-cpu=native, in target/native): the same numbers bit for bit, about 20 %
   sooner. --portable builds it for the baseline instruction set instead.
   fixtures [--check]   write fixtures/*.toml from their definition in xtask/src/fixtures.rs

@@ -47,19 +47,22 @@ fn bench_conv(args: &[&std::ffi::OsStr], build: Build) -> anyhow::Result<()> {
 }
 
 /// Run the tracking experiment of Fig. 4 as the paper tracks (`sequence-fig4.toml`)
-/// and beyond it (`sequence-fig4-improved.toml`: vignetting estimated with the pose,
+/// and beyond it (`sequence-fig4-improved.toml`, and over 112 m through two streets,
+/// `sequence-long.toml`: vignetting estimated with the pose,
 /// constant-velocity prediction), or their quick subsets, and check the results.
 pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
-    let runs: [(&str, &str); 2] = if quick {
+    let runs: [(&str, &str); 3] = if quick {
         [
             ("sequence-fig4-quick.toml", "fig4-quick"),
             ("sequence-fig4-quick-improved.toml", "fig4-quick-improved"),
+            ("sequence-long-quick.toml", "long-quick"),
         ]
     } else {
         [
             ("sequence-fig4.toml", "fig4"),
             ("sequence-fig4-improved.toml", "fig4-improved"),
+            ("sequence-long.toml", "long"),
         ]
     };
     for (sequence, out) in runs {

@@ -545,11 +545,19 @@ pub fn display_name(method: Method) -> String {
 /// The Markdown summary table.
 pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m: f64) -> String {
     let mut s = format!("# {title}\n\n");
+    // Distance travelled by the camera up to each frame, metres.
+    let travelled: Vec<f64> = std::iter::once(0.0)
+        .chain(results.truth.windows(2).scan(0.0, |d, w| {
+            *d += (w[1].translation - w[0].translation).length();
+            Some(*d)
+        }))
+        .collect();
     let _ = writeln!(
         s,
-        "{} frames of ground truth; a track is lost when its position error exceeds {:.2} m \
-         or its optimisation diverges. Wall time {:.1} min.\n",
+        "{} frames of ground truth over {:.1} m of path; a track is lost when its position \
+         error exceeds {:.2} m or its optimisation diverges. Wall time {:.1} min.\n",
         results.truth.len(),
+        travelled.last().copied().unwrap_or(0.0),
         lost_threshold_m,
         results.wall_time_s / 60.0
     );
@@ -578,9 +586,10 @@ pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m
         .filter_map(|t| {
             t.lost_at.map(|k| {
                 format!(
-                    "{} N = {} (at frame {k})",
+                    "{} N = {} (at frame {k}, {:.1} m along the path)",
                     display_name(t.method),
-                    t.frame_step
+                    t.frame_step,
+                    travelled.get(k).copied().unwrap_or(f64::NAN)
                 )
             })
         })

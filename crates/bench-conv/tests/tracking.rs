@@ -44,6 +44,56 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
     }
 }
 
+/// The long sequence and its quick subset: the improved tracking of the same
+/// acquisition and shaking (no kerb), a path that turns from the X street into the Y
+/// street and stays near the road's centre line, clear of the cars parked along the
+/// kerbs (|across| < 0.7 m; their inner sides lie 1.35 m or more from it), from one
+/// street's end to the other's,
+/// at the frame density of the paper's sequence.
+#[test]
+fn the_long_sequence_runs_through_two_streets_on_the_road() {
+    let improved =
+        SequenceSpec::load(&root().join("fixtures/sequence-fig4-improved.toml")).unwrap();
+    for (name, steps) in [
+        ("sequence-long.toml", vec![10, 20]),
+        ("sequence-long-quick.toml", vec![20]),
+    ] {
+        let long = SequenceSpec::load(&root().join("fixtures").join(name)).unwrap();
+        assert_eq!(long.frame_steps, steps);
+        assert_eq!(long.acquisition, improved.acquisition);
+        assert_eq!(long.methods, improved.methods);
+        assert!(long.constant_velocity && long.vvs_config().unwrap().vignetting);
+        let t = &long.trajectory;
+        assert!(
+            t.shake.kerb_drop_m == 0.0 && t.shake.kerb_pitch_deg == 0.0,
+            "no kerb"
+        );
+        assert_eq!(t.turns.len(), 1);
+        let spacing = t.length_m / (t.frames - 1) as f64;
+        let paper = improved.trajectory.length_m / (improved.trajectory.frames - 1) as f64;
+        assert!(
+            (spacing / paper - 1.0).abs() < 0.01,
+            "{spacing} m per frame"
+        );
+        let poses = t.poses();
+        for p in &poses {
+            let q = p.translation;
+            let across = if q.y.abs() < 3.5 && q.x < 0.0 {
+                q.y
+            } else {
+                q.x
+            };
+            assert!(across.abs() < 3.5, "{name}: off the road at {q}");
+        }
+        let (first, last) = (poses[0].translation, poses[poses.len() - 1].translation);
+        assert!(first.x < -5.0 && first.y.abs() < 2.0, "{first}");
+        assert!(last.y > 5.0 && last.x.abs() < 2.0, "{last}");
+        if name == "sequence-long.toml" {
+            assert!(t.length_m > 109.0 && first.x < -54.0 && last.y > 54.0);
+        }
+    }
+}
+
 /// A short, mildly shaken sequence through the city: PGMoT tracks every frame to
 /// centimetres, the results are written, read back, and summarised.
 #[test]

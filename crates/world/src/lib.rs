@@ -7,4 +7,4 @@ pub mod sequence;
 
 pub use city::{City, CityParams, KERB_HEIGHT_M, Textures, camera_looking_down};
 pub use error::WorldError;
-pub use sequence::{Acquisition, Shake, Trajectory};
+pub use sequence::{Acquisition, Shake, Trajectory, Turn};

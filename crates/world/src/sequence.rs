@@ -3,11 +3,13 @@
 //! renderer's the way real ones do.
 //!
 //! # Trajectory
-//! The robot moves in a straight line from `start` (the ground point under the camera,
-//! `[x, y, z]`, metres) along `heading_deg` over `length_m`, in `frames` frames at
-//! `fps`, its speed varying by `speed_variation` (relative, one slow sinusoid). The
-//! camera (the omnidirectional camera looking down, camera X forward) rides
-//! `camera_height_m` above the ground. On top of that ([`Shake`]):
+//! The robot moves from `start` (the ground point under the camera, `[x, y, z]`,
+//! metres) along `heading_deg` over `length_m`, in `frames` frames at `fps`, its speed
+//! varying by `speed_variation` (relative, one slow sinusoid): in a straight line, or
+//! through `turns` ([`Turn`]: at a distance along the path, an arc of a radius that
+//! turns the heading by an angle, then straight on), e.g. from one street into
+//! another. The camera (the omnidirectional camera looking down, camera X forward)
+//! rides `camera_height_m` above the ground. On top of that ([`Shake`]):
 //!
 //! * **sway**: roll, pitch and yaw oscillations, each the sum of a sinusoid of amplitude
 //!   `sway_deg[k]` at `sway_hz[k]` and one of half that amplitude at 2.3 × the
@@ -75,6 +77,28 @@ pub struct Trajectory {
     pub shake: Shake,
     /// Seed of the shaking's phases and bumps.
     pub seed: u64,
+    /// Turns along the path, in order (none: a straight line).
+    pub turns: Vec<Turn>,
+}
+
+/// A turn of the path: at `at_m` along it, an arc of radius `radius_m` that turns the
+/// heading by `angle_deg` (positive: to the left, counter-clockwise seen from above).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Turn {
+    /// Distance along the path where the arc begins, metres.
+    pub at_m: f64,
+    /// Heading change, degrees (positive: left).
+    pub angle_deg: f64,
+    /// Radius of the arc, metres.
+    pub radius_m: f64,
+}
+
+impl Turn {
+    /// Length of the arc, metres.
+    pub fn arc_length_m(&self) -> f64 {
+        self.radius_m * self.angle_deg.to_radians().abs()
+    }
 }
 
 impl Default for Trajectory {
@@ -90,6 +114,7 @@ impl Default for Trajectory {
             speed_variation: 0.1,
             shake: Shake::default(),
             seed: 3,
+            turns: Vec::new(),
         }
     }
 }
@@ -222,6 +247,24 @@ impl Trajectory {
                 && finite(s.bump_length_m),
             "trajectory.shake values must be finite and >= 0 (bump_length_m > 0)"
         );
+        let mut free_from = 0.0;
+        for (k, t) in self.turns.iter().enumerate() {
+            ensure!(
+                [t.at_m, t.angle_deg, t.radius_m].iter().all(|v| finite(*v))
+                    && t.radius_m > 0.0
+                    && t.angle_deg.abs() <= 360.0,
+                "trajectory.turns[{k}]: at_m, angle_deg and radius_m must be finite, \
+                 radius_m > 0 and |angle_deg| <= 360"
+            );
+            ensure!(
+                t.at_m >= free_from && t.at_m <= self.length_m,
+                "trajectory.turns[{k}] at {} m must start after the previous turn ends \
+                 ({free_from} m) and within the path's {} m",
+                t.at_m,
+                self.length_m
+            );
+            free_from = t.at_m + t.arc_length_m();
+        }
         ensure!(
             s.bumps_per_m * self.length_m <= 1e6,
             "trajectory: {} bumps per metre over {} m is more than a million bumps",
@@ -229,6 +272,35 @@ impl Trajectory {
             self.length_m
         );
         Ok(())
+    }
+
+    /// The ground point under the camera (without shaking) and the heading, radians,
+    /// at distance `d` along the path.
+    pub fn centerline(&self, d: f64) -> (DVec3, f64) {
+        let mut point = DVec3::from(self.start);
+        let mut heading = self.heading_deg.to_radians();
+        let mut reached = 0.0;
+        let forward = |h: f64| DVec3::new(h.cos(), h.sin(), 0.0);
+        let left = |h: f64| DVec3::new(-h.sin(), h.cos(), 0.0);
+        for turn in &self.turns {
+            if d <= turn.at_m {
+                break;
+            }
+            point += forward(heading) * (turn.at_m - reached);
+            // The arc about its centre, on the side the path turns to.
+            let side = turn.angle_deg.signum();
+            let centre = point + left(heading) * (side * turn.radius_m);
+            let along = (d - turn.at_m).min(turn.arc_length_m());
+            let turned = side * along / turn.radius_m;
+            let at = centre - left(heading + turned) * (side * turn.radius_m);
+            if d < turn.at_m + turn.arc_length_m() {
+                return (at, heading + turned);
+            }
+            point = at;
+            heading += turn.angle_deg.to_radians();
+            reached = turn.at_m + turn.arc_length_m();
+        }
+        (point + forward(heading) * (d - reached), heading)
     }
 
     /// Time of frame `k`, seconds.
@@ -260,9 +332,6 @@ impl Trajectory {
             t - self.speed_variation / w * ((w * t + phases[6]).cos() - phases[6].cos())
         };
         let total = travelled(duration);
-        let heading = self.heading_deg.to_radians();
-        let forward = DVec3::new(heading.cos(), heading.sin(), 0.0);
-        let left = DVec3::new(-heading.sin(), heading.cos(), 0.0);
         let sigma = s.bump_length_m;
         let bump_height = |d: f64| -> (f64, f64) {
             bumps.iter().fold((0.0, 0.0), |(h, slope), &(c, a)| {
@@ -299,10 +368,10 @@ impl Trajectory {
                 };
                 let lateral =
                     s.lateral_m * (std::f64::consts::TAU * 0.4 * t + phases[2] + 1.0).sin();
-                let position = DVec3::from(self.start)
-                    + forward * d
-                    + left * lateral
-                    + DVec3::Z * (ground + self.camera_height_m);
+                let (on_path, heading) = self.centerline(d);
+                let left = DVec3::new(-heading.sin(), heading.cos(), 0.0);
+                let position =
+                    on_path + left * lateral + DVec3::Z * (ground + self.camera_height_m);
                 let base = crate::city::camera_looking_down(position, heading);
                 // Camera X is forward: roll about X, pitch about Y (with the ground's
                 // slope and the kerb), yaw about Z.

@@ -3,7 +3,7 @@
 use frame::{Frame, Image, PixelStatus};
 use test_support::workspace_root as root;
 use ucm::Camera;
-use world::{Acquisition, Trajectory};
+use world::{Acquisition, Shake, Trajectory, Turn};
 
 fn camera() -> Camera {
     Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap()
@@ -60,6 +60,114 @@ fn trajectory_has_the_papers_length_the_kerb_and_the_shaking() {
         },
     ] {
         assert!(bad.validate().is_err(), "{bad:?}");
+    }
+}
+
+/// A path with turns: straight where it should be, on its arcs at their radius, of
+/// the length asked for, its heading continuous, and the camera's X axis along it;
+/// turns that overlap, leave the path or are not finite are refused.
+#[test]
+fn turns_take_the_path_round_corners() {
+    use std::f64::consts::FRAC_PI_2;
+    let straight = Trajectory::default();
+    // Without turns the centreline is the straight line of the heading.
+    for d in [0.0, 1.0, 4.35] {
+        let (p, h) = straight.centerline(d);
+        let expected = glam::DVec3::from(straight.start) + glam::DVec3::new(0.0, d, 0.0);
+        assert!((p - expected).length() < 1e-12 && (h - FRAC_PI_2).abs() < 1e-15);
+    }
+    // East 10 m, a left quarter turn of radius 3 m, north 10 m; then a right one.
+    let turn = Turn {
+        at_m: 10.0,
+        angle_deg: 90.0,
+        radius_m: 3.0,
+    };
+    let arc = turn.arc_length_m();
+    assert!((arc - 3.0 * FRAC_PI_2).abs() < 1e-12);
+    let t = Trajectory {
+        frames: 600,
+        start: [-10.0, -3.0, 0.0],
+        heading_deg: 0.0,
+        length_m: 20.0 + arc + 5.0 + arc,
+        shake: Shake {
+            kerb_at_m: None,
+            ..Shake::default()
+        },
+        turns: vec![
+            turn,
+            Turn {
+                at_m: 20.0 + arc,
+                angle_deg: -90.0,
+                radius_m: 3.0,
+            },
+        ],
+        ..Trajectory::default()
+    };
+    t.validate().unwrap();
+    let (p, h) = t.centerline(10.0);
+    assert!((p - glam::DVec3::new(0.0, -3.0, 0.0)).length() < 1e-12 && h.abs() < 1e-15);
+    // Half-way round the arc: 45°, on the circle about (0, 0).
+    let (p, h) = t.centerline(10.0 + arc / 2.0);
+    assert!((p.truncate().length() - 3.0).abs() < 1e-12, "{p}");
+    assert!((h - FRAC_PI_2 / 2.0).abs() < 1e-12);
+    let (p, h) = t.centerline(10.0 + arc);
+    assert!(
+        (p - glam::DVec3::new(3.0, 0.0, 0.0)).length() < 1e-12 && (h - FRAC_PI_2).abs() < 1e-12
+    );
+    let (p, _) = t.centerline(20.0 + arc);
+    assert!(
+        (p - glam::DVec3::new(3.0, 10.0, 0.0)).length() < 1e-12,
+        "{p}"
+    );
+    let (p, h) = t.centerline(t.length_m);
+    // Round the second corner (centre (6, 10)) to (6, 13), then 5 m east.
+    assert!(
+        (p - glam::DVec3::new(11.0, 13.0, 0.0)).length() < 1e-9,
+        "{p}"
+    );
+    assert!(h.abs() < 1e-12, "heading back to east: {h}");
+    // The length along the centreline is the path's, and the heading is continuous.
+    let n = 20_000;
+    let mut length = 0.0;
+    for k in 0..n {
+        let (a, ha) = t.centerline(t.length_m * k as f64 / n as f64);
+        let (b, hb) = t.centerline(t.length_m * (k + 1) as f64 / n as f64);
+        length += (b - a).length();
+        assert!((hb - ha).abs() < 1e-3);
+    }
+    assert!((length - t.length_m).abs() < 1e-6, "{length}");
+    // The camera's X axis follows the heading (shaking aside: a few degrees).
+    let poses = t.poses();
+    let mid_second_leg = poses[poses.len() * 2 / 3];
+    let x_axis = mid_second_leg.rotation_matrix().col(0);
+    assert!(
+        x_axis.angle_between(glam::DVec3::Y) < 10f64.to_radians(),
+        "{x_axis}"
+    );
+    for bad in [
+        vec![Turn {
+            radius_m: 0.0,
+            ..turn
+        }],
+        vec![Turn {
+            at_m: f64::NAN,
+            ..turn
+        }],
+        vec![Turn {
+            at_m: 100.0,
+            ..turn
+        }],
+        vec![turn, Turn { at_m: 11.0, ..turn }],
+        vec![Turn {
+            angle_deg: 720.0,
+            ..turn
+        }],
+    ] {
+        let bad = Trajectory {
+            turns: bad,
+            ..t.clone()
+        };
+        assert!(bad.validate().is_err(), "{:?}", bad.turns);
     }
 }
 
