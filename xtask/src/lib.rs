@@ -47,8 +47,8 @@ commands:
                        tracking by successive alignments (§4, Fig. 4): a shaken sequence
                        through the synthetic city tracked by PoT and PGMoT with 1 frame in
                        N, fixtures/sequence-fig4.toml; beyond the paper the same tracked
-                       with the vignetting estimated and a constant-velocity prediction
-                       (sequence-fig4-improved.toml), and over 112 m through two streets
+                       with the vignetting estimated and the last displacement repeated
+                       (sequence-fig4-improved.toml), and over 110 m through two streets
                        (sequence-long.toml); --quick: their CI subsets (*-quick*.toml).
                        Results (frames.csv, summary.md, plots, overlays) in results/fig4*/
                        and results/long*/, checked for consistency.

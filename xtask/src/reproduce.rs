@@ -47,9 +47,9 @@ fn bench_conv(args: &[&std::ffi::OsStr], build: Build) -> anyhow::Result<()> {
 }
 
 /// Run the tracking experiment of Fig. 4 as the paper tracks (`sequence-fig4.toml`)
-/// and beyond it (`sequence-fig4-improved.toml`, and over 112 m through two streets,
+/// and beyond it (`sequence-fig4-improved.toml`, and over 110 m through two streets,
 /// `sequence-long.toml`: vignetting estimated with the pose,
-/// constant-velocity prediction), or their quick subsets, and check the results.
+/// the last displacement repeated), or their quick subsets, and check the results.
 pub fn fig4(quick: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
     let runs: [(&str, &str); 3] = if quick {

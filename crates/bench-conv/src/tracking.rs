@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
-use vvs::{Method, Servo, StopReason, Tracker, VvsConfig};
+use vvs::{Method, Prediction, Recovery, Servo, StopReason, Tracker, VvsConfig};
 
 use crate::progress::Progress;
 use crate::protocol::Scene;
@@ -64,10 +64,14 @@ pub struct SequenceSpec {
     /// the true camera's frame.
     #[serde(default = "default_initial_offset")]
     pub initial_offset: [f64; 6],
-    /// Beyond the paper (off by default): start each frame from a constant-velocity
-    /// prediction ([`vvs::Tracker::with_constant_velocity`]).
+    /// Where each alignment starts ([`vvs::Prediction`]: `last`, the paper's and the
+    /// default, `constant_velocity` or `constant_translation`).
     #[serde(default)]
-    pub constant_velocity: bool,
+    pub prediction: Prediction,
+    /// Beyond the paper: a `[recovery]` table checks every alignment and searches again
+    /// after a failed one ([`vvs::Recovery`]; absent: off, as in the paper).
+    #[serde(default)]
+    pub recovery: Option<Recovery>,
     /// The cloud.
     pub scene: Scene,
     /// The trajectory.
@@ -115,6 +119,9 @@ impl SequenceSpec {
             self.initial_offset.iter().all(|v| v.is_finite()),
             "initial_offset must be finite"
         );
+        if let Some(recovery) = &self.recovery {
+            recovery.validate()?;
+        }
         self.trajectory.validate()?;
         self.acquisition.validate()?;
         self.vvs_config()?;
@@ -214,13 +221,17 @@ pub struct FrameRecord {
     pub iterations: [usize; 2],
     /// Why the optimisation stopped.
     pub stop: StopReason,
+    /// Whether the first alignment failed and the frame was searched again
+    /// ([`vvs::Recovery`]).
+    pub recovered: bool,
     /// Wall time of the frame's alignment, seconds.
     pub wall_time_s: f64,
 }
 
 /// Track one method with one frame step ([`vvs::Tracker`]): returns the records of the
 /// frames aligned (the last one is where the track was lost, if it was) and whether it
-/// was lost (diverged, or farther than `lost_threshold_m` from the truth).
+/// was lost (diverged, or farther than `lost_threshold_m` from the truth). `on_frame`
+/// is called after each aligned frame (progress).
 pub fn track(
     servo: Servo<'_>,
     method: Method,
@@ -228,10 +239,12 @@ pub fn track(
     spec: &SequenceSpec,
     truth: &[Isometry3],
     acquired: &[Option<Image>],
+    on_frame: impl Fn(),
 ) -> anyhow::Result<(Vec<FrameRecord>, bool)> {
     let initial = truth[0] * Isometry3::from_pose_vector(spec.initial_offset)?;
-    let mut tracker =
-        Tracker::new(servo, method, initial)?.with_constant_velocity(spec.constant_velocity);
+    let mut tracker = Tracker::new(servo, method, initial)?
+        .with_prediction(spec.prediction)
+        .with_recovery(spec.recovery.clone())?;
     let mut records = Vec::new();
     let report = tracker.track(acquired.iter().map(Option::as_ref), frame_step, |tracked| {
         let k = tracked.frame;
@@ -248,8 +261,10 @@ pub fn track(
             rotation_error_deg: dr.to_degrees(),
             iterations: tracked.outcome.iterations,
             stop: tracked.outcome.stop,
+            recovered: tracked.recovered,
             wall_time_s: tracked.wall_time_s,
         });
+        on_frame();
         if dt > spec.lost_threshold_m {
             ControlFlow::Break(())
         } else {
@@ -350,8 +365,13 @@ pub fn run_sequence(
         .par_iter()
         .map(|&(method, n)| {
             let servo = Servo::new(cloud, camera, config.clone())?;
-            let (records, lost) = track(servo, method, n, spec, &truth, &acquired)?;
-            bar.inc(truth.len().div_ceil(n) as u64, "");
+            let label = format!("{} N={n}", display_name(method));
+            let (records, lost) = track(servo, method, n, spec, &truth, &acquired, || {
+                bar.inc(1, &label)
+            })?;
+            // A lost track skips its remaining frames.
+            let remaining = truth.len().div_ceil(n).saturating_sub(records.len());
+            bar.inc(remaining as u64, "");
             Ok((records, lost))
         })
         .collect();
@@ -374,7 +394,7 @@ pub fn run_sequence(
     ))
 }
 
-const CSV_HEADER: [&str; 22] = [
+const CSV_HEADER: [&str; 23] = [
     "method",
     "frame_step",
     "frame",
@@ -396,6 +416,7 @@ const CSV_HEADER: [&str; 22] = [
     "iterations_step1",
     "iterations_step2",
     "stop",
+    "recovered",
     "wall_time_s",
 ];
 
@@ -423,6 +444,7 @@ pub fn write_csv(path: &Path, records: &[FrameRecord]) -> anyhow::Result<()> {
             r.iterations[0].to_string(),
             r.iterations[1].to_string(),
             r.stop.to_string(),
+            r.recovered.to_string(),
             format!("{:.6}", r.wall_time_s),
         ]);
         writer.write_record(&row)?;
@@ -464,7 +486,8 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Vec<FrameRecord>> {
             rotation_error_deg: parse!(17),
             iterations: [parse!(18), parse!(19)],
             stop: parse!(20),
-            wall_time_s: parse!(21),
+            recovered: parse!(21),
+            wall_time_s: parse!(22),
         });
     }
     Ok(records)
@@ -495,6 +518,8 @@ pub struct TrackSummary {
     pub mean_time_per_frame_s: f64,
     /// Mean iterations per frame.
     pub mean_iterations: f64,
+    /// Frames searched again after a failed alignment ([`vvs::Recovery`]).
+    pub recoveries: usize,
 }
 
 /// Summarise every track, in the order of `lost`.
@@ -528,6 +553,7 @@ pub fn summarize(results: &TrackingResults) -> Vec<TrackSummary> {
                     .map(|r| (r.iterations[0] + r.iterations[1]) as f64)
                     .sum::<f64>()
                     / n,
+                recoveries: rs.iter().filter(|r| r.recovered).count(),
             }
         })
         .collect()
@@ -561,12 +587,12 @@ pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m
         lost_threshold_m,
         results.wall_time_s / 60.0
     );
-    s.push_str("| method | N | frames | position RMSE | rotation RMSE | final drift | max error | lost | time per frame | iterations per frame |\n");
-    s.push_str("|---|---:|---:|---:|---:|---:|---:|---|---:|---:|\n");
+    s.push_str("| method | N | frames | position RMSE | rotation RMSE | final drift | max error | lost | time per frame | iterations per frame | searches |\n");
+    s.push_str("|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|\n");
     for t in summarize(results) {
         let _ = writeln!(
             s,
-            "| {} | {} | {}/{} | {:.4} m | {:.3}° | {:.4} m | {:.4} m | {} | {:.2} s | {:.0} |",
+            "| {} | {} | {}/{} | {:.4} m | {:.3}° | {:.4} m | {:.4} m | {} | {:.2} s | {:.0} | {} |",
             display_name(t.method),
             t.frame_step,
             t.frames,
@@ -578,7 +604,8 @@ pub fn summary_markdown(title: &str, results: &TrackingResults, lost_threshold_m
             t.lost_at
                 .map_or("no".to_string(), |k| format!("at frame {k}")),
             t.mean_time_per_frame_s,
-            t.mean_iterations
+            t.mean_iterations,
+            t.recoveries
         );
     }
     let lost: Vec<String> = summarize(results)

@@ -4,6 +4,7 @@ use bench_conv::tracking::{
     SequenceSpec, TrackingResults, read_csv, run_sequence, summarize, write_csv, write_results,
 };
 use test_support::workspace_root as root;
+use vvs::Prediction;
 use world::sequence::{Acquisition, Trajectory};
 
 /// The quick file relies on the models' defaults: they must be the full file's values.
@@ -28,7 +29,8 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
         }
     );
     assert!(full.vvs_config().unwrap().normalize);
-    assert!(!full.constant_velocity && !full.vvs_config().unwrap().vignetting);
+    assert!(full.prediction == Prediction::Last && full.recovery.is_none());
+    assert!(!full.vvs_config().unwrap().vignetting);
     // The improved tracking: the same sequences, tracked beyond the paper.
     for (improved, plain) in [
         ("sequence-fig4-improved.toml", &full),
@@ -40,7 +42,12 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
         assert_eq!(improved.frame_steps, plain.frame_steps);
         assert_eq!(improved.methods, plain.methods);
         assert_eq!(improved.initial_offset, plain.initial_offset);
-        assert!(improved.constant_velocity && improved.vvs_config().unwrap().vignetting);
+        assert_ne!(improved.prediction, Prediction::Last);
+        assert!(improved.vvs_config().unwrap().vignetting);
+        let full_improved =
+            SequenceSpec::load(&root().join("fixtures/sequence-fig4-improved.toml")).unwrap();
+        assert_eq!(improved.prediction, full_improved.prediction);
+        assert_eq!(improved.recovery, full_improved.recovery);
     }
 }
 
@@ -62,7 +69,9 @@ fn the_long_sequence_runs_through_two_streets_on_the_road() {
         assert_eq!(long.frame_steps, steps);
         assert_eq!(long.acquisition, improved.acquisition);
         assert_eq!(long.methods, improved.methods);
-        assert!(long.constant_velocity && long.vvs_config().unwrap().vignetting);
+        assert_eq!(long.prediction, improved.prediction);
+        assert_eq!(long.recovery, improved.recovery);
+        assert!(long.vvs_config().unwrap().vignetting);
         let t = &long.trajectory;
         assert!(
             t.shake.kerb_drop_m == 0.0 && t.shake.kerb_pitch_deg == 0.0,
@@ -165,8 +174,22 @@ max_iterations = 80
     assert_eq!(back.len(), results.records.len());
     for (a, b) in back.iter().zip(&results.records) {
         assert_eq!(
-            (&a.method, a.frame_step, a.frame, a.iterations, &a.stop),
-            (&b.method, b.frame_step, b.frame, b.iterations, &b.stop)
+            (
+                &a.method,
+                a.frame_step,
+                a.frame,
+                a.iterations,
+                &a.stop,
+                a.recovered
+            ),
+            (
+                &b.method,
+                b.frame_step,
+                b.frame,
+                b.iterations,
+                &b.stop,
+                b.recovered
+            )
         );
         assert!((a.position_error_m - b.position_error_m).abs() < 1e-8);
         for k in 0..6 {
@@ -192,5 +215,29 @@ max_iterations = 80
     .unwrap();
     let err = SequenceSpec::load(&dir.join("bad.toml")).unwrap_err();
     assert!(format!("{err:#}").contains("steps"), "{err:#}");
+    // The prediction and the recovery parse, strictly.
+    let with = |extra: &str| {
+        let text = text.replace(
+            "initial_offset = [0.03, 0.0, 0.0, 0.0, 0.0, 0.01]",
+            &format!("initial_offset = [0.03, 0.0, 0.0, 0.0, 0.0, 0.01]\n{extra}"),
+        );
+        std::fs::write(dir.join("more.toml"), text).unwrap();
+        SequenceSpec::load(&dir.join("more.toml"))
+    };
+    let spec = with("prediction = \"constant_translation\"").unwrap();
+    assert_eq!(spec.prediction, Prediction::ConstantTranslation);
+    assert!(spec.recovery.is_none());
+    let spec = with("[recovery]\nmax_jump_m = 0.2\n").unwrap();
+    let recovery = spec.recovery.unwrap();
+    assert_eq!(recovery.max_jump_m, 0.2);
+    assert_eq!(recovery.search, vvs::Recovery::default().search);
+    for (bad, says) in [
+        ("prediction = \"sideways\"", "sideways"),
+        ("[recovery]\nmax_jump = 0.2\n", "max_jump"),
+        ("[recovery]\nmax_jump_deg = -1.0\n", "max_jump_deg"),
+    ] {
+        let err = with(bad).unwrap_err();
+        assert!(format!("{err:#}").contains(says), "{bad}: {err:#}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -42,7 +42,7 @@ pub enum VvsError {
         expected: String,
     },
     /// [`crate::Tracker::align`] after the track was lost.
-    #[error("the track is lost: an alignment diverged")]
+    #[error("the track is lost: an alignment diverged (or failed, and so did the search after it)")]
     TrackLost,
     /// [`crate::Tracker::track`] reached a frame it must use but was not given.
     #[error("frame {0} of the sequence is to be tracked but was not given")]

@@ -18,4 +18,4 @@ pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;
 pub use servo::Servo;
-pub use track::{TrackReport, TrackedFrame, Tracker};
+pub use track::{Prediction, Recovery, TrackReport, TrackedFrame, Tracker};

@@ -5,7 +5,9 @@ use std::ops::ControlFlow;
 use frame::Image;
 use glam::DVec3;
 use ucm::Isometry3;
-use vvs::{Method, Servo, StopReason, Tracker, VvsConfig, VvsError};
+use vvs::{
+    Method, Prediction, PriorBox, Recovery, Servo, StopReason, Tracker, VvsConfig, VvsError,
+};
 use world::{Acquisition, camera_looking_down};
 
 use crate::common::*;
@@ -157,6 +159,35 @@ fn lost_tracks_and_bad_input() {
     ));
 }
 
+/// The predictions extrapolate the last two estimates: the last one itself, the whole
+/// last motion repeated, or its translation alone with the last orientation.
+#[test]
+fn predictions_extrapolate_the_last_two_estimates() {
+    let previous = Isometry3::from_pose_vector([1.0, -2.0, 0.5, 0.1, -0.2, 0.3]).unwrap();
+    let estimate =
+        previous * Isometry3::from_pose_vector([0.2, 0.05, -0.01, 0.02, -0.03, 0.05]).unwrap();
+    for prediction in [
+        Prediction::Last,
+        Prediction::ConstantVelocity,
+        Prediction::ConstantTranslation,
+    ] {
+        assert_eq!(
+            prediction.predict(estimate, None),
+            estimate,
+            "{prediction:?}"
+        );
+    }
+    assert_eq!(Prediction::default(), Prediction::Last);
+    assert_eq!(Prediction::Last.predict(estimate, Some(previous)), estimate);
+    let velocity = Prediction::ConstantVelocity.predict(estimate, Some(previous));
+    let (dt, dr) = velocity.distance_to(&(estimate * (previous.inverse() * estimate)));
+    assert!(dt < 1e-12 && dr < 1e-12);
+    let translation = Prediction::ConstantTranslation.predict(estimate, Some(previous));
+    assert_eq!(translation.rotation, estimate.rotation);
+    let expected = 2.0 * estimate.translation - previous.translation;
+    assert!((translation.translation - expected).length() < 1e-12);
+}
+
 /// The constant-velocity prediction repeats the last motion between aligned frames:
 /// on a steady motion it starts the next frame far closer than the last estimate.
 #[test]
@@ -165,10 +196,13 @@ fn constant_velocity_predicts_a_steady_motion() {
     let truth = truth(7);
     let mut servo = Servo::new(&city().cloud, &camera, config()).unwrap();
     let frames: Vec<_> = truth.iter().map(|p| servo.render(p).unwrap()).collect();
-    let mut tracker = Tracker::new(servo, Method::Rule2, truth[0])
+    // The initial pose is a guess: its correction is not a motion of the camera.
+    let initial =
+        truth[0] * Isometry3::from_pose_vector([0.05, -0.05, 0.02, 0.0, 0.0, 0.02]).unwrap();
+    let mut tracker = Tracker::new(servo, Method::Rule2, initial)
         .unwrap()
-        .with_constant_velocity(true);
-    assert_eq!(tracker.prediction(), truth[0], "nothing to extrapolate yet");
+        .with_prediction(Prediction::ConstantVelocity);
+    assert_eq!(tracker.prediction(), initial, "nothing to extrapolate yet");
     let first = tracker.align(&frames[0]).unwrap().world_from_camera;
     assert_eq!(tracker.prediction(), first, "one estimate: no velocity yet");
     let second = tracker.align(&frames[3]).unwrap().world_from_camera;
@@ -180,4 +214,101 @@ fn constant_velocity_predicts_a_steady_motion() {
     let (from_estimate, _) = second.distance_to(&truth[6]);
     eprintln!("frame 6 starts {from_prediction:.4} m away (last estimate: {from_estimate:.4} m)");
     assert!(from_prediction < from_estimate / 5.0);
+}
+
+/// Recovery: an alignment that ends farther from its start than the gates allow is
+/// searched again in the box around its start, and the search's outcome is kept; an
+/// alignment within the gates is kept as it is; a search that diverges loses the
+/// track; bad gates are typed errors.
+#[test]
+fn recovery_searches_again_after_a_failed_alignment() {
+    let camera = fixture();
+    let truth = truth(4);
+    let mut servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let frames: Vec<_> = truth.iter().map(|p| servo.render(p).unwrap()).collect();
+    let start = truth[0] * Isometry3::from_pose_vector([0.15, -0.1, 0.0, 0.0, 0.0, 0.02]).unwrap();
+    // Gates tighter than the start's error: the converged alignment counts as a jump.
+    let strict = Recovery {
+        max_jump_m: 0.05,
+        max_jump_deg: 20.0,
+        search: PriorBox {
+            translation_m: [0.5, 0.5, 0.25],
+            rotation_deg: [5.0, 5.0, 5.0],
+        },
+    };
+    let servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let mut tracker = Tracker::new(servo, Method::Rule2, start)
+        .unwrap()
+        .with_recovery(Some(strict.clone()))
+        .unwrap();
+    let outcome = tracker.align(&frames[0]).unwrap();
+    assert!(tracker.recovered() && !tracker.is_lost());
+    assert!(outcome.search.is_some(), "the kept outcome is the search's");
+    let (dt, dr) = outcome.world_from_camera.distance_to(&truth[0]);
+    eprintln!("recovered: {dt:.4} m, {:.3}°", dr.to_degrees());
+    assert!(dt < 0.01 && dr.to_degrees() < 0.3);
+    // The next frame, 2 cm on: within the gates, not searched again.
+    let outcome = tracker.align(&frames[1]).unwrap();
+    assert!(!tracker.recovered() && outcome.search.is_none());
+    assert!(outcome.world_from_camera.distance_to(&truth[1]).0 < 0.01);
+    // Through `track`, each frame says whether it was searched again.
+    let servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let mut tracker = Tracker::new(servo, Method::Rule2, start)
+        .unwrap()
+        .with_recovery(Some(strict.clone()))
+        .unwrap();
+    let report = tracker
+        .track(frames.iter().map(Some), 2, |_| ControlFlow::Continue(()))
+        .unwrap();
+    assert!(!report.lost);
+    let recovered: Vec<bool> = report.frames.iter().map(|f| f.recovered).collect();
+    assert_eq!(recovered, [true, false]);
+
+    // Without recovery the same start converges as it is.
+    let servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let mut tracker = Tracker::new(servo, Method::Rule2, start).unwrap();
+    let outcome = tracker.align(&frames[0]).unwrap();
+    assert!(!tracker.recovered() && outcome.search.is_none());
+
+    // A camera far above the city: the alignment and the search both diverge.
+    let servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let high = camera_looking_down(DVec3::new(-20.0, 0.5, 500.0), 0.0);
+    let mut tracker = Tracker::new(servo, Method::Rule2, high)
+        .unwrap()
+        .with_recovery(Some(Recovery::default()))
+        .unwrap();
+    let outcome = tracker.align(&frames[0]).unwrap();
+    assert!(tracker.recovered() && tracker.is_lost());
+    assert!(matches!(
+        outcome.stop,
+        StopReason::Diverged(_) | StopReason::IterationBudget
+    ));
+    assert_eq!(tracker.estimate(), high);
+
+    // Bad gates.
+    for bad in [
+        Recovery {
+            max_jump_m: 0.0,
+            ..Recovery::default()
+        },
+        Recovery {
+            max_jump_deg: f64::NAN,
+            ..Recovery::default()
+        },
+        Recovery {
+            search: PriorBox {
+                translation_m: [-1.0, 1.0, 1.0],
+                rotation_deg: [1.0; 3],
+            },
+            ..Recovery::default()
+        },
+    ] {
+        let servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+        assert!(matches!(
+            Tracker::new(servo, Method::Rule2, truth[0])
+                .unwrap()
+                .with_recovery(Some(bad)),
+            Err(VvsError::Config { .. })
+        ));
+    }
 }
