@@ -40,9 +40,10 @@ commands:
                        global localisation inside the prior box (beyond the paper, method
                        `global`): fixtures/protocol-global.toml (the 448 poses of Fig. 3 at
                        the paper's offsets and at half of them) and
-                       fixtures/protocol-global-uniform.toml (starts drawn inside the box);
-                       --quick: fixtures/protocol-global-quick.toml. Results in
-                       results/global*/.
+                       fixtures/protocol-global-uniform.toml (starts drawn inside the box),
+                       fixtures/protocol-global-any-heading*.toml (any heading, no compass;
+                       the paper's translations and twice them); --quick:
+                       fixtures/protocol-global*-quick.toml. Results in results/global*/.
   reproduce-fig4 [--quick] [--portable]
                        tracking by successive alignments (§4, Fig. 4): a shaken sequence
                        through the synthetic city tracked by PoT and PGMoT with 1 frame in

@@ -128,16 +128,28 @@ pub fn fig3(quick: bool, extras: bool, domain: bool, build: Build) -> anyhow::Re
 }
 
 /// Run the global localisation protocols (method `global`, beyond the paper): the
-/// paper's poses at the corners of the box and at half of them, and starts drawn
-/// uniformly inside it (or the quick subset), and check the result files.
+/// paper's poses at the corners of the box and at half of them, starts drawn
+/// uniformly inside it, and starts with any heading searched without a compass (or the
+/// quick subsets), and check the result files.
 pub fn global(quick: bool, build: Build) -> anyhow::Result<()> {
     let root = project_root();
     let runs: &[(&str, &str)] = if quick {
-        &[("protocol-global-quick.toml", "global-quick")]
+        &[
+            ("protocol-global-quick.toml", "global-quick"),
+            (
+                "protocol-global-any-heading-quick.toml",
+                "global-any-heading-quick",
+            ),
+        ]
     } else {
         &[
             ("protocol-global.toml", "global"),
             ("protocol-global-uniform.toml", "global-uniform"),
+            ("protocol-global-any-heading.toml", "global-any-heading"),
+            (
+                "protocol-global-any-heading-wide.toml",
+                "global-any-heading-wide",
+            ),
         ]
     };
     for (protocol, out) in runs {

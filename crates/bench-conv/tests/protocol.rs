@@ -60,6 +60,8 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
         "protocol-global.toml",
         "protocol-global-uniform.toml",
         "protocol-global-quick.toml",
+        "protocol-global-any-heading.toml",
+        "protocol-global-any-heading-quick.toml",
         "protocol-fig3-domain.toml",
         "protocol-fig3-axes.toml",
         "protocol-fig3-domain-quick.toml",
@@ -93,6 +95,22 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
             }
         }
     }
+    // Twice the paper's translations reach the sidewalks and 0–6 m of height: parsed,
+    // with the heading search on and every heading drawn.
+    let wide =
+        Protocol::load(&root().join("fixtures/protocol-global-any-heading-wide.toml")).unwrap();
+    assert_eq!(wide.runs(false).unwrap().len(), 7 * 16);
+    assert_eq!(wide.prior_box().rotation_deg[2], 180.0);
+    let configs = wide.method_configs(false).unwrap();
+    assert_eq!(configs[0].config.global.heading_spacing_deg, Some(15.0));
+    assert_eq!(configs[0].config.global.prior, wide.prior_box());
+    let headings: Vec<f64> = (0..16)
+        .map(|i| wide.offset(0, i, 1.0)[5].to_degrees())
+        .collect();
+    assert!(
+        headings.iter().any(|h| *h > 90.0) && headings.iter().any(|h| *h < -90.0),
+        "{headings:?}"
+    );
     let full = Protocol::load(&root().join("fixtures/protocol-fig3.toml")).unwrap();
     assert_eq!(full.desired.len(), 7);
     assert_eq!(full.initial_indices().len(), 64);

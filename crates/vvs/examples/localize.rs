@@ -4,13 +4,15 @@
 //! ```text
 //! cargo run --release -p vvs --example localize -- \
 //!     --picture image.png --camera camera.toml --cloud city.laz \
-//!     --initial tx,ty,tz,θwx,θwy,θwz [--prior 8,2,1.5,10,10,15] [--method rule2] \
+//!     --initial tx,ty,tz,θwx,θwy,θwz [--prior 8,2,1.5,10,10,15 [--heading-spacing 15]] \
+//!     [--method rule2] \
 //!     [--crop x,y,w,h] [--mei-yaml calib.yml --annulus inner,outer] [--truth tx,…]
 //! ```
 //!
 //! Poses are the paper's `r = (t, θw)` of `world_from_camera` (metres, radians). With
 //! `--prior` (the box's ±X,±Y,±Z metres and ±θwX,±θwY,±θwZ degrees, in the camera's
-//! frame) the global search of `vvs::global` runs inside that box around `--initial`.
+//! frame) the global search of `vvs::global` runs inside that box around `--initial`;
+//! without a compass, give `--prior 8,2,1.5,10,10,180 --heading-spacing 15`.
 
 use std::path::PathBuf;
 
@@ -46,6 +48,10 @@ struct Args {
     /// Prior box for the global search: X,Y,Z (m), θwX,θwY,θwZ (degrees).
     #[arg(long)]
     prior: Option<String>,
+    /// With --prior: try headings (rotations about the optical axis) at most this many
+    /// degrees apart across the box's θwZ range (180: any heading, no compass).
+    #[arg(long)]
+    heading_spacing: Option<f64>,
     /// Local method without a prior box (povs, rule0, rule1, rule2).
     #[arg(long, default_value = "rule2")]
     method: Method,
@@ -97,7 +103,7 @@ fn main() -> anyhow::Result<()> {
         cloud: args.cloud,
     };
     let initial = Isometry3::from_pose_vector(numbers::<6>(&args.initial)?)?;
-    let localizer = Localizer {
+    let mut localizer = Localizer {
         method: args.method,
         prior: match args.prior.as_deref() {
             Some(text) => {
@@ -111,6 +117,7 @@ fn main() -> anyhow::Result<()> {
         },
         ..Localizer::default()
     };
+    localizer.config.global.heading_spacing_deg = args.heading_spacing;
     let localized = localizer.localize_files(&files, initial)?;
     let o = &localized.outcome;
     println!(

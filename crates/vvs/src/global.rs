@@ -11,10 +11,16 @@
 //!    [`PriorBox`]) are covered by a regular grid of at most
 //!    [`GlobalConfig::grid_spacing_m`] between nodes; each node keeps the initial
 //!    orientation (the paper's rules recover ±10°/±10°/±15° from a start whose
-//!    position is close enough: `docs/RESULTS.md`).
+//!    position is close enough: `docs/RESULTS.md`), or, with
+//!    [`GlobalConfig::heading_spacing_deg`], takes every heading (rotation about the
+//!    optical axis, `θwZ`) of the box at most that far apart: a robot with a GPS fix
+//!    and no compass searches every heading (`rotation_deg[2] = 180`).
 //! 2. **Screening and descents, at low resolution.** Every candidate is scored by the
 //!    PGM cost at λ*₁ on an image [`GlobalConfig::search_downsampling`] times smaller
-//!    (λ scaled alike, so the same angular blur); the [`GlobalConfig::screened`] best
+//!    (λ scaled alike, so the same angular blur). Headings cost no rendering: a camera
+//!    turned about its optical axis sees the same rays, so each node is rendered once
+//!    and compared with the desired image turned back by each heading (resampled once
+//!    per heading, [`turned_about_optical_axis`]). The [`GlobalConfig::screened`] best
 //!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
 //!    and are ranked again by their cost; descents that end within
 //!    [`GlobalConfig::merge_distance_m`] of a better one are dropped as duplicates.
@@ -34,8 +40,9 @@
 //! The outcome is that of the winning refinement, with a [`SearchReport`] of what the
 //! search did and its whole time in `time_s`.
 
+use frame::{AnyImage, Image};
 use serde::{Deserialize, Serialize};
-use ucm::Isometry3;
+use ucm::{Camera, Isometry3};
 
 use crate::{Method, VvsError};
 
@@ -64,7 +71,8 @@ impl Default for PriorBox {
 }
 
 impl PriorBox {
-    /// Check the box: finite, non-negative, rotations below 90°.
+    /// Check the box: finite, non-negative, tilts (`θwX`, `θwY`) below 90°, heading
+    /// (`θwZ`) at most 180° (180: any heading).
     pub fn validate(&self) -> Result<(), VvsError> {
         let bad = |message: String| {
             Err(VvsError::Config {
@@ -77,10 +85,16 @@ impl PriorBox {
                 return bad(format!("translations must be in [0, 10000] m, got {t}"));
             }
         }
-        for r in self.rotation_deg {
-            if !(0.0..90.0).contains(&r) {
-                return bad(format!("rotations must be in [0, 90) degrees, got {r}"));
+        for r in &self.rotation_deg[..2] {
+            if !(0.0..90.0).contains(r) {
+                return bad(format!("tilts must be in [0, 90) degrees, got {r}"));
             }
+        }
+        let heading = self.rotation_deg[2];
+        if !(0.0..=180.0).contains(&heading) {
+            return bad(format!(
+                "the heading must be in [0, 180] degrees, got {heading}"
+            ));
         }
         Ok(())
     }
@@ -90,15 +104,17 @@ impl PriorBox {
     /// `p = translation of (t, θw)⁻¹ = −R(θw)ᵀ t` over the box (a box of 8 m turned by
     /// 15° reaches 4 m across). For a fixed rotation `|p_k|` is largest at a corner of
     /// the translation box (it is linear in `t`); the rotations are sampled on a grid
-    /// of 11 values per axis, corners included.
+    /// of at least 11 values per axis, corners included, at most 2° apart.
     pub fn position_extent_m(&self) -> [f64; 3] {
-        const STEPS: usize = 10;
         let r = self.rotation_deg.map(f64::to_radians);
+        let steps = self
+            .rotation_deg
+            .map(|d| ((2.0 * d / 2.0).ceil() as usize).clamp(10, 180));
         let t = self.translation_m;
-        let sample = |k: usize, i: usize| r[k] * (2.0 * i as f64 / STEPS as f64 - 1.0);
+        let sample = |k: usize, i: usize| r[k] * (2.0 * i as f64 / steps[k] as f64 - 1.0);
         let mut extent = [0.0f64; 3];
-        for (i, j, l) in (0..=STEPS)
-            .flat_map(|i| (0..=STEPS).flat_map(move |j| (0..=STEPS).map(move |l| (i, j, l))))
+        for (i, j, l) in (0..=steps[0])
+            .flat_map(|i| (0..=steps[1]).flat_map(move |j| (0..=steps[2]).map(move |l| (i, j, l))))
         {
             let rotation = [sample(0, i), sample(1, j), sample(2, l)];
             let Ok(turn) =
@@ -186,6 +202,101 @@ impl PriorBox {
         }
         Ok(out)
     }
+
+    /// The headings (rotations about the optical axis, radians) a search with at most
+    /// `spacing_deg` between them tries: `[0]` without a spacing or heading range;
+    /// otherwise `2m + 1` values `iθ/m`, `|i| ≤ m = ⌈θ / spacing⌉` (`θ = rotation_deg[2]`:
+    /// the initial heading and both ends included), and at 180° `⌈360 / spacing⌉`
+    /// values around the circle from 0. Sorted by magnitude (0 first).
+    pub fn headings_rad(&self, spacing_deg: Option<f64>) -> Vec<f64> {
+        let theta = self.rotation_deg[2];
+        let Some(spacing) = spacing_deg.filter(|_| theta > 0.0) else {
+            return vec![0.0];
+        };
+        let mut out: Vec<f64> = if theta >= 180.0 {
+            let n = (360.0 / spacing - 1e-9).ceil().max(1.0) as usize;
+            (0..n)
+                .map(|i| {
+                    let d = 360.0 * i as f64 / n as f64;
+                    if d > 180.0 { d - 360.0 } else { d }
+                })
+                .collect()
+        } else {
+            let m = (theta / spacing - 1e-9).ceil().max(1.0) as i64;
+            (-m..=m).map(|i| theta * i as f64 / m as f64).collect()
+        };
+        out.sort_by(|a, b| a.abs().total_cmp(&b.abs()).then(a.total_cmp(b)));
+        out.into_iter().map(f64::to_radians).collect()
+    }
+}
+
+/// `picture` as the camera would see it turned by `angle_rad` about its optical axis
+/// (`world_from_camera · Rz(angle)`): each pixel takes the bilinear interpolation of
+/// `picture` where its ray, turned by the angle, meets the image. Pixels whose four
+/// neighbours there are not all observed (outside the valid region, or unobserved) are
+/// not observed. Exact up to the interpolation for any camera model: turning about the
+/// optical axis changes no ray, only which pixel sees it.
+pub fn turned_about_optical_axis(
+    picture: &impl AnyImage,
+    camera: &Camera,
+    angle_rad: f64,
+) -> Result<Image, VvsError> {
+    if picture.width() != camera.width() || picture.height() != camera.height() {
+        return Err(VvsError::DesiredSize {
+            got_width: picture.width(),
+            got_height: picture.height(),
+            width: camera.width(),
+            height: camera.height(),
+        });
+    }
+    let (w, h) = (camera.width() as usize, camera.height() as usize);
+    let (sin, cos) = angle_rad.sin_cos();
+    let source = picture.intensity();
+    let valid = camera.valid_pixels();
+    let observed = |k: usize| valid[k] && picture.is_observed(k);
+    let mut intensity = vec![0.0f32; w * h];
+    let mut seen = vec![false; w * h];
+    for (k, (value, seen)) in intensity.iter_mut().zip(&mut seen).enumerate() {
+        if !valid[k] {
+            continue;
+        }
+        let Ok(ray) = camera.unproject([(k % w) as f64, (k / w) as f64]) else {
+            continue;
+        };
+        // The turned camera's ray in the frame of the camera before the turn.
+        let turned = [
+            cos * ray[0] - sin * ray[1],
+            sin * ray[0] + cos * ray[1],
+            ray[2],
+        ];
+        let Ok([u, v]) = camera.project_unbounded(turned) else {
+            continue;
+        };
+        let (u0, v0) = (u.floor(), v.floor());
+        if !(u0 >= 0.0 && v0 >= 0.0 && u0 + 1.0 < w as f64 && v0 + 1.0 < h as f64) {
+            continue;
+        }
+        let (i, j) = (u0 as usize, v0 as usize);
+        let corners = [
+            j * w + i,
+            j * w + i + 1,
+            (j + 1) * w + i,
+            (j + 1) * w + i + 1,
+        ];
+        if !corners.iter().all(|&c| observed(c)) {
+            continue;
+        }
+        let (fu, fv) = ((u - u0) as f32, (v - v0) as f32);
+        let [a, b, c, d] = corners.map(|c| source[c]);
+        *value = (a * (1.0 - fu) + b * fu) * (1.0 - fv) + (c * (1.0 - fu) + d * fu) * fv;
+        *seen = true;
+    }
+    Ok(Image::from_parts(
+        camera.width(),
+        camera.height(),
+        intensity,
+        seen,
+    )?)
 }
 
 /// Settings of [`Method::Global`] (`VvsConfig::global`).
@@ -196,6 +307,9 @@ pub struct GlobalConfig {
     pub prior: PriorBox,
     /// Largest distance between grid nodes along the initial camera's X, Y, Z, metres.
     pub grid_spacing_m: [f64; 3],
+    /// Largest angle between the headings tried at each node, degrees (`None`: every
+    /// node keeps the initial heading, which the rules correct within about ±19°).
+    pub heading_spacing_deg: Option<f64>,
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
     /// Candidates kept after screening, each then descends.
@@ -215,6 +329,7 @@ impl Default for GlobalConfig {
         Self {
             prior: PriorBox::default(),
             grid_spacing_m: [2.0, 2.0, 1.5],
+            heading_spacing_deg: None,
             search_downsampling: 4,
             screened: 20,
             descent_iterations: 10,
@@ -238,6 +353,14 @@ impl GlobalConfig {
             if !(s > 0.0 && s.is_finite()) {
                 return bad("global.grid_spacing_m", format!("must be > 0, got {s}"));
             }
+        }
+        if let Some(s) = self.heading_spacing_deg
+            && !(s > 0.0 && s <= 360.0)
+        {
+            return bad(
+                "global.heading_spacing_deg",
+                format!("must be in (0, 360], got {s}"),
+            );
         }
         if !(1..=16).contains(&self.search_downsampling) {
             return bad(
@@ -281,6 +404,9 @@ pub struct SearchReport {
     /// Position of the winning node in the initial camera's frame, metres (`None`:
     /// every node diverged and the initial pose itself was refined).
     pub chosen_node_m: Option<[f64; 3]>,
+    /// Heading of the winning node relative to the initial pose, degrees (0 without
+    /// heading search; `None` with `chosen_node_m`).
+    pub chosen_heading_deg: Option<f64>,
     /// Rank of the winner among the refinements (0: the best descent).
     pub chosen_rank: usize,
     /// Final cost of every refinement, in rank order (infinite: diverged).

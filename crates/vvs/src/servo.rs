@@ -313,19 +313,43 @@ impl<'a> Servo<'a> {
             desired.downsampled(factor, &self.levels[search].camera)?
         };
 
-        // Screening: the cost of every node at low resolution.
+        // Screening: the cost of every node at low resolution, at every heading (the
+        // desired image turned back by each heading, one after the other in
+        // `search_desired`).
+        let headings = prior.headings_rad(settings.heading_spacing_deg);
         self.search_desired.clear();
-        let g_star = self.levels[search].pgm.transform(&desired_small, lambda)?;
-        self.search_desired.extend_from_slice(g_star);
-        let mut screened: Vec<(f64, usize)> = Vec::with_capacity(nodes.len());
-        for (index, node) in nodes.iter().enumerate() {
-            let pose = initial * Isometry3::from_translation(DVec3::from_array(*node));
-            let cost = self.search_cost(search, &pose, lambda)?;
-            if cost.is_finite() {
-                screened.push((cost, index));
+        for &heading in &headings {
+            let g_star = if heading == 0.0 {
+                self.levels[search].pgm.transform(&desired_small, lambda)?
+            } else {
+                let turned = crate::global::turned_about_optical_axis(
+                    &desired_small,
+                    &self.levels[search].camera,
+                    -heading,
+                )?;
+                self.levels[search].pgm.transform(&turned, lambda)?
+            };
+            self.search_desired.extend_from_slice(g_star);
+        }
+        let node_pose = |index: usize, heading: usize| {
+            let position = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
+            match Isometry3::from_pose_vector([0.0, 0.0, 0.0, 0.0, 0.0, headings[heading]]) {
+                Ok(turn) if headings[heading] != 0.0 => position * turn,
+                _ => position,
+            }
+        };
+        let mut screened: Vec<(f64, usize, usize)> =
+            Vec::with_capacity(nodes.len() * headings.len());
+        let mut costs = vec![f64::INFINITY; headings.len()];
+        for index in 0..nodes.len() {
+            self.search_cost(search, &node_pose(index, 0), lambda, &mut costs)?;
+            for (heading, &cost) in costs.iter().enumerate() {
+                if cost.is_finite() {
+                    screened.push((cost, index, heading));
+                }
             }
         }
-        screened.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        screened.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
         screened.truncate(settings.screened);
 
         // Descents of the best, at low resolution.
@@ -340,11 +364,12 @@ impl<'a> Servo<'a> {
             cap: settings.descent_iterations,
             last_of_step: true,
         };
-        let mut descended: Vec<(f64, usize, Isometry3)> = Vec::with_capacity(screened.len());
+        let mut descended: Vec<(f64, (usize, usize), Isometry3)> =
+            Vec::with_capacity(screened.len());
         let mut descent_iterations = 0;
         let mut history = Vec::new();
-        for &(_, index) in &screened {
-            let mut pose = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
+        for &(_, index, heading) in &screened {
+            let mut pose = node_pose(index, heading);
             history.clear();
             let mut coefficients = self.vignetting_start;
             let result = self.run_stage(
@@ -357,11 +382,11 @@ impl<'a> Servo<'a> {
             )?;
             descent_iterations += result.iterations;
             if !matches!(result.stop, StopReason::Diverged(_)) && result.cost.is_finite() {
-                descended.push((result.cost, index, pose));
+                descended.push((result.cost, (index, heading), pose));
             }
         }
         descended.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let mut kept: Vec<(usize, Isometry3)> = Vec::with_capacity(settings.refined);
+        let mut kept: Vec<((usize, usize), Isometry3)> = Vec::with_capacity(settings.refined);
         for &(_, index, pose) in &descended {
             if kept.len() == settings.refined {
                 break;
@@ -375,7 +400,7 @@ impl<'a> Servo<'a> {
         }
         if kept.is_empty() {
             // Every node diverged: refine the initial pose, which says how.
-            kept.push((usize::MAX, initial));
+            kept.push(((usize::MAX, 0), initial));
         }
 
         // Refinements at full resolution: the lowest final cost wins.
@@ -399,13 +424,15 @@ impl<'a> Servo<'a> {
             }
         }
         let (chosen_rank, mut outcome) = best.expect("at least one refinement");
-        let chosen = kept[chosen_rank].0;
+        let (chosen, chosen_heading) = kept[chosen_rank].0;
+        let chosen_node_m = nodes.get(chosen).copied();
         outcome.search = Some(SearchReport {
-            candidates: nodes.len(),
+            candidates: nodes.len() * headings.len(),
             descents: screened.len(),
             refinements: kept.len(),
             descent_iterations,
-            chosen_node_m: nodes.get(chosen).copied(),
+            chosen_node_m,
+            chosen_heading_deg: chosen_node_m.map(|_| headings[chosen_heading].to_degrees()),
             chosen_rank,
             refined_costs,
         });
@@ -434,20 +461,23 @@ impl<'a> Servo<'a> {
     }
 
     /// The mean squared PGM residual at `world_from_camera` on level `level` against
-    /// `self.search_desired` (infinite where the pose is outside the cloud's enlarged
-    /// bounds or sees too little of it).
+    /// each desired PGM of `self.search_desired` (one per heading, into `costs`;
+    /// infinite where the pose is outside the cloud's enlarged bounds or sees too
+    /// little of it).
     fn search_cost(
         &mut self,
         level: usize,
         world_from_camera: &Isometry3,
         lambda: f32,
-    ) -> Result<f64, VvsError> {
+        costs: &mut [f64],
+    ) -> Result<(), VvsError> {
+        costs.fill(f64::INFINITY);
         if outside(
             self.bounds,
             self.config.bounds_margin_m,
             world_from_camera.translation,
         ) {
-            return Ok(f64::INFINITY);
+            return Ok(());
         }
         let Level {
             camera,
@@ -459,19 +489,25 @@ impl<'a> Servo<'a> {
         let stats = renderer.render(self.cloud, &world_from_camera.inverse(), frame)?;
         let valid = camera.valid_pixel_count().max(1) as f64;
         if (stats.pixels_hit as f64) / valid < self.config.min_hit_fraction {
-            return Ok(f64::INFINITY);
+            return Ok(());
         }
         let g = pgm.transform(frame, lambda)?;
         let n = g.len().max(1) as f64;
-        let sum: f64 = g
-            .iter()
-            .zip(&self.search_desired)
-            .map(|(&a, &b)| {
-                let e = f64::from(a - b);
-                e * e
-            })
-            .sum();
-        Ok(sum / n)
+        for (cost, desired) in costs
+            .iter_mut()
+            .zip(self.search_desired.chunks_exact(g.len().max(1)))
+        {
+            let sum: f64 = g
+                .iter()
+                .zip(desired)
+                .map(|(&a, &b)| {
+                    let e = f64::from(a - b);
+                    e * e
+                })
+                .sum();
+            *cost = sum / n;
+        }
+        Ok(())
     }
 
     /// Align with several methods from the same `initial` pose: one outcome per method,

@@ -1,6 +1,7 @@
 //! Global localisation inside a prior box (beyond the paper): geometry of the box and
 //! convergence on renderings of the synthetic city with known ground truth.
 
+use frame::AnyImage;
 use vvs::{Method, PriorBox, Servo, StopReason, VvsConfig};
 
 use crate::common::*;
@@ -213,4 +214,135 @@ fn global_converges_from_inside_the_box() {
     ];
     let (dt, dr, _) = localize(r);
     assert!(dt < 0.02 && dr < 0.5, "{dt} m, {dr}°");
+}
+
+/// Turning a camera about its optical axis changes which pixel sees each ray, not the
+/// rays: the rendering from the turned pose is the unturned rendering resampled, up to
+/// the interpolation (and the splats' own sampling), and far from the unturned one.
+#[test]
+fn a_turn_about_the_optical_axis_is_a_resampling() {
+    let (mut servo, _) = servo_with(VvsConfig::default());
+    let camera = fixture();
+    let straight = servo.render(&desired_pose()).unwrap();
+    for degrees in [-40.0f64, 25.0, 120.0] {
+        let angle = degrees.to_radians();
+        let turned_pose = offset([0.0, 0.0, 0.0, 0.0, 0.0, angle]);
+        let rendered = servo.render(&turned_pose).unwrap();
+        let resampled = vvs::turned_about_optical_axis(&straight, &camera, angle).unwrap();
+        let (mut resampling_error, mut unturned_error, mut n) = (0.0f64, 0.0f64, 0usize);
+        for k in 0..rendered.intensity.len() {
+            if resampled.valid[k] && rendered.is_observed(k) {
+                resampling_error +=
+                    f64::from((resampled.intensity[k] - rendered.intensity[k]).abs());
+                unturned_error += f64::from((straight.intensity[k] - rendered.intensity[k]).abs());
+                n += 1;
+            }
+        }
+        let valid = camera.valid_pixel_count();
+        assert!(
+            n as f64 > 0.9 * valid as f64,
+            "{degrees}°: {n} of {valid} compared"
+        );
+        let (resampling_error, unturned_error) =
+            (resampling_error / n as f64, unturned_error / n as f64);
+        eprintln!(
+            "{degrees}°: mean |resampled − rendered| {resampling_error:.4}, unturned {unturned_error:.4}"
+        );
+        assert!(
+            resampling_error < 0.03 && resampling_error < 0.25 * unturned_error,
+            "{degrees}°: {resampling_error} vs {unturned_error}"
+        );
+    }
+    // A mismatched picture is refused.
+    let small = frame::Frame::new(10, 10);
+    assert!(vvs::turned_about_optical_axis(&small, &camera, 0.1).is_err());
+}
+
+/// The headings a search tries: the initial one alone without a spacing; otherwise the
+/// box's range at most the spacing apart, ends included, 0 first; the whole circle once
+/// at 180°. Boxes and spacings out of range are refused.
+#[test]
+fn headings_cover_the_box() {
+    let paper = PriorBox::default();
+    assert_eq!(paper.headings_rad(None), vec![0.0]);
+    let degrees = |b: &PriorBox, s| -> Vec<f64> {
+        b.headings_rad(Some(s))
+            .iter()
+            .map(|h| (h.to_degrees() * 1e6).round() / 1e6)
+            .collect()
+    };
+    assert_eq!(degrees(&paper, 10.0), vec![0.0, -7.5, 7.5, -15.0, 15.0]);
+    assert_eq!(degrees(&paper, 30.0), vec![0.0, -15.0, 15.0]);
+    let any = PriorBox {
+        translation_m: [8.0, 2.0, 1.5],
+        rotation_deg: [10.0, 10.0, 180.0],
+    };
+    any.validate().unwrap();
+    let mut circle = degrees(&any, 15.0);
+    assert_eq!(circle.len(), 24);
+    assert_eq!(circle[0], 0.0);
+    circle.sort_by(f64::total_cmp);
+    assert_eq!(circle.first(), Some(&-165.0));
+    assert_eq!(circle.last(), Some(&180.0));
+    assert!(circle.windows(2).all(|w| (w[1] - w[0] - 15.0).abs() < 1e-9));
+    // Any heading: the positions cover the disc the box's translations sweep.
+    let e = any.position_extent_m();
+    let reach = (8f64 * 8.0 + 2.0 * 2.0).sqrt();
+    assert!(e[0] >= reach - 0.01 && e[1] >= reach - 0.01, "{e:?}");
+    for bad in [[10.0, 10.0, 181.0], [90.0, 0.0, 0.0], [0.0, 0.0, -1.0]] {
+        let b = PriorBox {
+            translation_m: [1.0; 3],
+            rotation_deg: bad,
+        };
+        assert!(b.validate().is_err(), "{bad:?}");
+    }
+    for bad in [0.0, -5.0, f64::NAN, 400.0] {
+        let mut config = VvsConfig::default();
+        config.global.heading_spacing_deg = Some(bad);
+        let message = config.validate().unwrap_err().to_string();
+        assert!(message.contains("heading_spacing_deg"), "{bad}: {message}");
+    }
+}
+
+/// A robot with a GPS fix and no compass: the start is 5 m away and turned by 130°
+/// about the vertical. Without heading search the global search ends elsewhere; with
+/// headings 15° apart it converges to the millimetre, and reports the heading it chose.
+#[test]
+fn global_converges_from_any_heading_with_heading_search() {
+    let r = [
+        4.0,
+        -1.2,
+        0.8,
+        4f64.to_radians(),
+        (-6f64).to_radians(),
+        130f64.to_radians(),
+    ];
+    let any = PriorBox {
+        translation_m: [8.0, 2.0, 1.5],
+        rotation_deg: [10.0, 10.0, 180.0],
+    };
+    let (mut servo, desired) = servo_with(VvsConfig::default());
+    let blind = servo.localize_in_box(&desired, offset(r), &any).unwrap();
+    let (blind_dt, _) = blind.world_from_camera.distance_to(&desired_pose());
+    assert!(
+        blind_dt > 0.5,
+        "converged without heading search: {blind_dt} m"
+    );
+
+    let mut config = VvsConfig::default();
+    config.global.heading_spacing_deg = Some(15.0);
+    let (mut servo, desired) = servo_with(config);
+    let outcome = servo.localize_in_box(&desired, offset(r), &any).unwrap();
+    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
+    let search = outcome.search.expect("a search report");
+    eprintln!("{dt:.5} m, {:.4}°, {search:?}", dr.to_degrees());
+    assert!(
+        dt < 0.02 && dr.to_degrees() < 0.5,
+        "{dt} m, {}°",
+        dr.to_degrees()
+    );
+    // The truth is at −130° from the start; the chosen heading is within a spacing.
+    let chosen = search.chosen_heading_deg.expect("a chosen node");
+    assert!((chosen + 130.0).abs() <= 15.0, "{chosen}°");
+    assert_eq!(search.candidates % 24, 0);
 }
