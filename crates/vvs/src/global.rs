@@ -207,12 +207,27 @@ impl PriorBox {
     /// `spacing_deg` between them tries: `[0]` without a spacing or heading range;
     /// otherwise `2m + 1` values `iθ/m`, `|i| ≤ m = ⌈θ / spacing⌉` (`θ = rotation_deg[2]`:
     /// the initial heading and both ends included), and at 180° `⌈360 / spacing⌉`
-    /// values around the circle from 0. Sorted by magnitude (0 first).
-    pub fn headings_rad(&self, spacing_deg: Option<f64>) -> Vec<f64> {
+    /// values around the circle from 0. Sorted by magnitude (0 first). Errors on an
+    /// invalid box or spacing, or past [`MAX_HEADINGS`] headings.
+    pub fn headings_rad(&self, spacing_deg: Option<f64>) -> Result<Vec<f64>, VvsError> {
+        self.validate()?;
         let theta = self.rotation_deg[2];
         let Some(spacing) = spacing_deg.filter(|_| theta > 0.0) else {
-            return vec![0.0];
+            return Ok(vec![0.0]);
         };
+        let count = if theta >= 180.0 {
+            360.0 / spacing
+        } else {
+            2.0 * (theta / spacing).ceil() + 1.0
+        };
+        if !(spacing > 0.0 && count <= MAX_HEADINGS as f64) {
+            return Err(VvsError::Config {
+                name: "global.heading_spacing_deg",
+                message: format!(
+                    "{spacing}° between headings over ±{theta}° would need more than {MAX_HEADINGS} headings"
+                ),
+            });
+        }
         let mut out: Vec<f64> = if theta >= 180.0 {
             let n = (360.0 / spacing - 1e-9).ceil().max(1.0) as usize;
             (0..n)
@@ -226,7 +241,7 @@ impl PriorBox {
             (-m..=m).map(|i| theta * i as f64 / m as f64).collect()
         };
         out.sort_by(|a, b| a.abs().total_cmp(&b.abs()).then(a.total_cmp(b)));
-        out.into_iter().map(f64::to_radians).collect()
+        Ok(out.into_iter().map(f64::to_radians).collect())
     }
 }
 
@@ -342,6 +357,9 @@ impl Default for GlobalConfig {
 
 /// The most grid nodes a search may have (a bound on its time, not on memory).
 pub const MAX_CANDIDATES: usize = 100_000;
+
+/// The most headings a search may try at each node (0.1° apart around the circle).
+pub const MAX_HEADINGS: usize = 3600;
 
 impl GlobalConfig {
     /// Check every field against its documented range. The prior box and the number of

@@ -9,7 +9,7 @@ use pgm::{Pgm, PgmOptions};
 use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 
-use crate::global::{PriorBox, SearchReport};
+use crate::global::{MAX_CANDIDATES, PriorBox, SearchReport};
 use crate::photometric::{MAX_COEFFICIENT, RadialVignetting};
 use crate::solve::solve;
 use crate::{
@@ -316,7 +316,28 @@ impl<'a> Servo<'a> {
         // Screening: the cost of every node at low resolution, at every heading (the
         // desired image turned back by each heading, one after the other in
         // `search_desired`).
-        let headings = prior.headings_rad(settings.heading_spacing_deg);
+        let headings = prior.headings_rad(settings.heading_spacing_deg)?;
+        if nodes.len() * headings.len() > MAX_CANDIDATES {
+            return Err(VvsError::Config {
+                name: "global.heading_spacing_deg",
+                message: format!(
+                    "{} positions × {} headings is more than {MAX_CANDIDATES} candidates",
+                    nodes.len(),
+                    headings.len()
+                ),
+            });
+        }
+        // The desired PGM of every heading is kept (4 bytes a sample): at most 256 MB.
+        let samples = self.levels[search].pgm.samples().len();
+        if headings.len().saturating_mul(samples) > 1 << 26 {
+            return Err(VvsError::Config {
+                name: "global.heading_spacing_deg",
+                message: format!(
+                    "{} headings × {samples} samples at the search's resolution would hold more than 256 MB",
+                    headings.len()
+                ),
+            });
+        }
         self.search_desired.clear();
         for &heading in &headings {
             let g_star = if heading == 0.0 {

@@ -264,9 +264,10 @@ fn a_turn_about_the_optical_axis_is_a_resampling() {
 #[test]
 fn headings_cover_the_box() {
     let paper = PriorBox::default();
-    assert_eq!(paper.headings_rad(None), vec![0.0]);
+    assert_eq!(paper.headings_rad(None).unwrap(), vec![0.0]);
     let degrees = |b: &PriorBox, s| -> Vec<f64> {
         b.headings_rad(Some(s))
+            .unwrap()
             .iter()
             .map(|h| (h.to_degrees() * 1e6).round() / 1e6)
             .collect()
@@ -296,6 +297,16 @@ fn headings_cover_the_box() {
         };
         assert!(b.validate().is_err(), "{bad:?}");
     }
+    // Too many headings (or positions × headings) is refused, not allocated.
+    assert!(any.headings_rad(Some(0.01)).is_err());
+    let mut config = VvsConfig::default();
+    config.global.heading_spacing_deg = Some(0.2);
+    let (mut servo, desired) = servo_with(config);
+    let message = servo
+        .localize_in_box(&desired, desired_pose(), &any)
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("candidates"), "{message}");
     for bad in [0.0, -5.0, f64::NAN, 400.0] {
         let mut config = VvsConfig::default();
         config.global.heading_spacing_deg = Some(bad);
