@@ -134,8 +134,9 @@ fn main() -> anyhow::Result<()> {
         o.stop, o.iterations, o.time_s, o.cost
     );
     if let Some(search) = &o.search {
+        let [screening, descents, refinement] = search.phase_times_s;
         println!(
-            "search: {} candidates, {} descents, {} refinements",
+            "search: {} candidates ({screening:.1} s), {} descents ({descents:.1} s), {} refinements ({refinement:.1} s)",
             search.candidates, search.descents, search.refinements
         );
     }

@@ -429,4 +429,7 @@ pub struct SearchReport {
     pub chosen_rank: usize,
     /// Final cost of every refinement, in rank order (infinite: diverged).
     pub refined_costs: Vec<f64>,
+    /// Wall time of each phase, seconds: screening (with the desired image's
+    /// preparation), low-resolution descents, full-resolution refinements.
+    pub phase_times_s: [f64; 3],
 }

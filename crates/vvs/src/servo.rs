@@ -373,6 +373,7 @@ impl<'a> Servo<'a> {
         screened.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
         screened.truncate(settings.screened);
 
+        let screening_s = started.elapsed().as_secs_f64();
         // Descents of the best, at low resolution.
         let planned = Planned {
             stage: Stage::Pgm {
@@ -424,6 +425,7 @@ impl<'a> Servo<'a> {
             kept.push(((usize::MAX, 0), initial));
         }
 
+        let descents_s = started.elapsed().as_secs_f64() - screening_s;
         // Refinements at full resolution: the lowest final cost wins.
         let mut best: Option<(usize, Outcome)> = None;
         let mut refined_costs = Vec::with_capacity(kept.len());
@@ -456,8 +458,12 @@ impl<'a> Servo<'a> {
             chosen_heading_deg: chosen_node_m.map(|_| headings[chosen_heading].to_degrees()),
             chosen_rank,
             refined_costs,
+            phase_times_s: [screening_s, descents_s, 0.0],
         });
         outcome.time_s = started.elapsed().as_secs_f64();
+        if let Some(search) = &mut outcome.search {
+            search.phase_times_s[2] = outcome.time_s - screening_s - descents_s;
+        }
         Ok(outcome)
     }
 
