@@ -12,7 +12,7 @@
 //! Poses are the paper's `r = (t, θw)` of `world_from_camera` (metres, radians). With
 //! `--prior` (the box's ±X,±Y,±Z metres and ±θwX,±θwY,±θwZ degrees, in the camera's
 //! frame) the global search of `vvs::global` runs inside that box around `--initial`;
-//! without a compass, give `--prior 8,2,1.5,10,10,180 --heading-spacing 15`.
+//! without a compass, give `--prior 8,2,1.5,10,10,180` (headings 15° apart are tried).
 
 use std::path::PathBuf;
 
@@ -49,9 +49,9 @@ struct Args {
     #[arg(long)]
     prior: Option<String>,
     /// With --prior: try headings (rotations about the optical axis) at most this many
-    /// degrees apart across the box's θwZ range (180: any heading, no compass).
-    #[arg(long)]
-    heading_spacing: Option<f64>,
+    /// degrees apart when the box's θwZ range exceeds it (180: any heading, no compass).
+    #[arg(long, default_value_t = 15.0)]
+    heading_spacing: f64,
     /// Local method without a prior box (povs, rule0, rule1, rule2).
     #[arg(long, default_value = "rule2")]
     method: Method,
@@ -117,7 +117,7 @@ fn main() -> anyhow::Result<()> {
         },
         ..Localizer::default()
     };
-    localizer.config.global.heading_spacing_deg = args.heading_spacing;
+    localizer.config.global.heading_spacing_deg = Some(args.heading_spacing);
     let localized = localizer.localize_files(&files, initial)?;
     let o = &localized.outcome;
     println!(

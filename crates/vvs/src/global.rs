@@ -11,10 +11,11 @@
 //!    [`PriorBox`]) are covered by a regular grid of at most
 //!    [`GlobalConfig::grid_spacing_m`] between nodes; each node keeps the initial
 //!    orientation (the paper's rules recover ±10°/±10°/±15° from a start whose
-//!    position is close enough: `docs/RESULTS.md`), or, with
-//!    [`GlobalConfig::heading_spacing_deg`], takes every heading (rotation about the
-//!    optical axis, `θwZ`) of the box at most that far apart: a robot with a GPS fix
-//!    and no compass searches every heading (`rotation_deg[2] = 180`).
+//!    position is close enough: `docs/RESULTS.md`); when the box's heading range
+//!    (rotation about the optical axis, `θwZ`) exceeds
+//!    [`GlobalConfig::heading_spacing_deg`] (15°), every node takes every heading of
+//!    the box at most that far apart: a robot with a GPS fix and no compass gives
+//!    `rotation_deg[2] = 180`.
 //! 2. **Screening and descents, at low resolution.** Every candidate is scored by the
 //!    PGM cost at λ*₁ on an image [`GlobalConfig::search_downsampling`] times smaller
 //!    (λ scaled alike, so the same angular blur). Headings cost no rendering: a camera
@@ -204,7 +205,8 @@ impl PriorBox {
     }
 
     /// The headings (rotations about the optical axis, radians) a search with at most
-    /// `spacing_deg` between them tries: `[0]` without a spacing or heading range;
+    /// `spacing_deg` between them tries: `[0]` without a spacing or when the box's
+    /// heading range is within it (the rules recover that much: the paper's ±15°);
     /// otherwise `2m + 1` values `iθ/m`, `|i| ≤ m = ⌈θ / spacing⌉` (`θ = rotation_deg[2]`:
     /// the initial heading and both ends included), and at 180° `⌈360 / spacing⌉`
     /// values around the circle from 0. Sorted by magnitude (0 first). Errors on an
@@ -212,7 +214,7 @@ impl PriorBox {
     pub fn headings_rad(&self, spacing_deg: Option<f64>) -> Result<Vec<f64>, VvsError> {
         self.validate()?;
         let theta = self.rotation_deg[2];
-        let Some(spacing) = spacing_deg.filter(|_| theta > 0.0) else {
+        let Some(spacing) = spacing_deg.filter(|&s| theta > s) else {
             return Ok(vec![0.0]);
         };
         let count = if theta >= 180.0 {
@@ -322,8 +324,10 @@ pub struct GlobalConfig {
     pub prior: PriorBox,
     /// Largest distance between grid nodes along the initial camera's X, Y, Z, metres.
     pub grid_spacing_m: [f64; 3],
-    /// Largest angle between the headings tried at each node, degrees (`None`: every
-    /// node keeps the initial heading, which the rules correct within about ±19°).
+    /// Largest angle between the headings tried at each node, degrees, when the box's
+    /// heading range `±rotation_deg[2]` exceeds it (default 15°, measured; `None`, or a
+    /// box within ±15°: every node keeps the initial heading, which the rules correct
+    /// within about ±19°).
     pub heading_spacing_deg: Option<f64>,
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
@@ -344,7 +348,7 @@ impl Default for GlobalConfig {
         Self {
             prior: PriorBox::default(),
             grid_spacing_m: [2.0, 2.0, 1.5],
-            heading_spacing_deg: None,
+            heading_spacing_deg: Some(15.0),
             search_downsampling: 4,
             screened: 20,
             descent_iterations: 10,

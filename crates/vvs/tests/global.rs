@@ -273,7 +273,15 @@ fn headings_cover_the_box() {
             .collect()
     };
     assert_eq!(degrees(&paper, 10.0), vec![0.0, -7.5, 7.5, -15.0, 15.0]);
-    assert_eq!(degrees(&paper, 30.0), vec![0.0, -15.0, 15.0]);
+    // Within the spacing (the paper's box at the default 15°): the initial heading.
+    assert_eq!(degrees(&paper, 15.0), vec![0.0]);
+    assert_eq!(VvsConfig::default().global.heading_spacing_deg, Some(15.0));
+    let thirty = PriorBox {
+        translation_m: [8.0, 2.0, 1.5],
+        rotation_deg: [10.0, 10.0, 30.0],
+    };
+    assert_eq!(degrees(&thirty, 15.0), vec![0.0, -15.0, 15.0, -30.0, 30.0]);
+    assert_eq!(degrees(&thirty, 20.0), vec![0.0, -15.0, 15.0, -30.0, 30.0]);
     let any = PriorBox {
         translation_m: [8.0, 2.0, 1.5],
         rotation_deg: [10.0, 10.0, 180.0],
@@ -317,7 +325,8 @@ fn headings_cover_the_box() {
 
 /// A robot with a GPS fix and no compass: the start is 5 m away and turned by 130°
 /// about the vertical. Without heading search the global search ends elsewhere; with
-/// headings 15° apart it converges to the millimetre, and reports the heading it chose.
+/// headings 15° apart (the default) it converges to the millimetre, and reports the
+/// heading it chose.
 #[test]
 fn global_converges_from_any_heading_with_heading_search() {
     let r = [
@@ -332,7 +341,9 @@ fn global_converges_from_any_heading_with_heading_search() {
         translation_m: [8.0, 2.0, 1.5],
         rotation_deg: [10.0, 10.0, 180.0],
     };
-    let (mut servo, desired) = servo_with(VvsConfig::default());
+    let mut config = VvsConfig::default();
+    config.global.heading_spacing_deg = None;
+    let (mut servo, desired) = servo_with(config);
     let blind = servo.localize_in_box(&desired, offset(r), &any).unwrap();
     let (blind_dt, _) = blind.world_from_camera.distance_to(&desired_pose());
     assert!(
