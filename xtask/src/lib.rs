@@ -42,7 +42,8 @@ commands:
                        the paper's offsets and at half of them) and
                        fixtures/protocol-global-uniform.toml (starts drawn inside the box),
                        fixtures/protocol-global-any-heading*.toml (any heading, no compass;
-                       the paper's translations and twice them); --quick:
+                       the paper's translations and twice them),
+                       fixtures/protocol-global-twice.toml (twice every offset); --quick:
                        fixtures/protocol-global*-quick.toml. Results in results/global*/.
   reproduce-fig4 [--quick] [--portable]
                        tracking by successive alignments (§4, Fig. 4): a shaken sequence

@@ -150,6 +150,7 @@ pub fn global(quick: bool, build: Build) -> anyhow::Result<()> {
                 "protocol-global-any-heading-wide.toml",
                 "global-any-heading-wide",
             ),
+            ("protocol-global-twice.toml", "global-twice"),
         ]
     };
     for (protocol, out) in runs {

@@ -111,6 +111,9 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
         headings.iter().any(|h| *h > 90.0) && headings.iter().any(|h| *h < -90.0),
         "{headings:?}"
     );
+    let twice = Protocol::load(&root().join("fixtures/protocol-global-twice.toml")).unwrap();
+    assert_eq!(twice.runs(false).unwrap().len(), 7 * 8);
+    assert_eq!(twice.prior_box().rotation_deg, [20.0, 20.0, 30.0]);
     let full = Protocol::load(&root().join("fixtures/protocol-fig3.toml")).unwrap();
     assert_eq!(full.desired.len(), 7);
     assert_eq!(full.initial_indices().len(), 64);

@@ -15,13 +15,16 @@
 //!    (rotation about the optical axis, `θwZ`) exceeds
 //!    [`GlobalConfig::heading_spacing_deg`] (15°), every node takes every heading of
 //!    the box at most that far apart: a robot with a GPS fix and no compass gives
-//!    `rotation_deg[2] = 180`.
+//!    `rotation_deg[2] = 180`. Likewise tilts beyond [`GlobalConfig::tilt_spacing_deg`]
+//!    (10°) are tried that far apart.
 //! 2. **Screening and descents, at low resolution.** Every candidate is scored by the
 //!    PGM cost at λ*₁ on an image [`GlobalConfig::search_downsampling`] times smaller
-//!    (λ scaled alike, so the same angular blur). Headings cost no rendering: a camera
-//!    turned about its optical axis sees the same rays, so each node is rendered once
-//!    and compared with the desired image turned back by each heading (resampled once
-//!    per heading, [`turned_about_optical_axis`]). The [`GlobalConfig::screened`] best
+//!    (λ scaled alike, so the same angular blur). Orientations cost no rendering: a
+//!    central camera turned about its centre sees the same rays, so each node is
+//!    rendered once and compared with the desired image turned back by each heading
+//!    and tilt (resampled once per orientation, [`turned_about_optical_axis`],
+//!    [`turned`]); a tilt leaves part of the field unobserved, and only the samples
+//!    farther than 2λ from it are compared. The [`GlobalConfig::screened`] best
 //!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
 //!    and are ranked again by their cost; descents that end within
 //!    [`GlobalConfig::merge_distance_m`] of a better one are dropped as duplicates.
@@ -247,6 +250,30 @@ impl PriorBox {
     }
 }
 
+impl PriorBox {
+    /// The tilts (`θwX` for `k` = 0, `θwY` for 1, radians) a search with at most
+    /// `spacing_deg` between them tries: `[0]` without a spacing or when the box's tilt
+    /// range is within it; otherwise `2m + 1` values `iθ/m`, `|i| ≤ m = ⌈θ / spacing⌉`,
+    /// sorted by magnitude.
+    pub fn tilts_rad(&self, k: usize, spacing_deg: Option<f64>) -> Result<Vec<f64>, VvsError> {
+        self.validate()?;
+        let theta = self.rotation_deg[k.min(1)];
+        let Some(spacing) = spacing_deg.filter(|&s| theta > s) else {
+            return Ok(vec![0.0]);
+        };
+        if !(spacing > 0.0 && 2.0 * (theta / spacing).ceil() + 1.0 <= MAX_HEADINGS as f64) {
+            return Err(VvsError::Config {
+                name: "global.tilt_spacing_deg",
+                message: format!("{spacing}° between tilts over ±{theta}° is too many"),
+            });
+        }
+        let m = (theta / spacing - 1e-9).ceil().max(1.0) as i64;
+        let mut out: Vec<f64> = (-m..=m).map(|i| theta * i as f64 / m as f64).collect();
+        out.sort_by(|a, b| a.abs().total_cmp(&b.abs()).then(a.total_cmp(b)));
+        Ok(out.into_iter().map(f64::to_radians).collect())
+    }
+}
+
 /// `picture` as the camera would see it turned by `angle_rad` about its optical axis
 /// (`world_from_camera · Rz(angle)`): each pixel takes the bilinear interpolation of
 /// `picture` where its ray, turned by the angle, meets the image. Pixels whose four
@@ -258,6 +285,37 @@ pub fn turned_about_optical_axis(
     camera: &Camera,
     angle_rad: f64,
 ) -> Result<Image, VvsError> {
+    let (sin, cos) = angle_rad.sin_cos();
+    resampled_by_rays(picture, camera, |ray| {
+        [
+            cos * ray[0] - sin * ray[1],
+            sin * ray[0] + cos * ray[1],
+            ray[2],
+        ]
+    })
+}
+
+/// `picture` as the camera would see it turned by `rotation` about its centre
+/// (`world_from_camera · rotation`), where the turned camera's field overlaps the
+/// original one (elsewhere not observed): [`turned_about_optical_axis`] for any
+/// rotation (a central camera's rays do not depend on its orientation).
+pub fn turned(
+    picture: &impl AnyImage,
+    camera: &Camera,
+    rotation: glam::DQuat,
+) -> Result<Image, VvsError> {
+    resampled_by_rays(picture, camera, |ray| {
+        rotation.mul_vec3(glam::DVec3::from_array(ray)).to_array()
+    })
+}
+
+/// Each pixel of the result takes the bilinear interpolation of `picture` where the
+/// ray `turn(ray of the pixel)` meets the image.
+fn resampled_by_rays(
+    picture: &impl AnyImage,
+    camera: &Camera,
+    turn: impl Fn([f64; 3]) -> [f64; 3],
+) -> Result<Image, VvsError> {
     if picture.width() != camera.width() || picture.height() != camera.height() {
         return Err(VvsError::DesiredSize {
             got_width: picture.width(),
@@ -267,7 +325,6 @@ pub fn turned_about_optical_axis(
         });
     }
     let (w, h) = (camera.width() as usize, camera.height() as usize);
-    let (sin, cos) = angle_rad.sin_cos();
     let source = picture.intensity();
     let valid = camera.valid_pixels();
     let observed = |k: usize| valid[k] && picture.is_observed(k);
@@ -281,12 +338,7 @@ pub fn turned_about_optical_axis(
             continue;
         };
         // The turned camera's ray in the frame of the camera before the turn.
-        let turned = [
-            cos * ray[0] - sin * ray[1],
-            sin * ray[0] + cos * ray[1],
-            ray[2],
-        ];
-        let Ok([u, v]) = camera.project_unbounded(turned) else {
+        let Ok([u, v]) = camera.project_unbounded(turn(ray)) else {
             continue;
         };
         let (u0, v0) = (u.floor(), v.floor());
@@ -329,6 +381,10 @@ pub struct GlobalConfig {
     /// box within ±15°: every node keeps the initial heading, which the rules correct
     /// within about ±19°).
     pub heading_spacing_deg: Option<f64>,
+    /// Largest angle between the tilts (`θwX`, `θwY`) tried at each node, degrees,
+    /// when the box's tilt range exceeds it (default 10°, measured; `None`, or a box
+    /// within ±10°: every node keeps the initial tilts).
+    pub tilt_spacing_deg: Option<f64>,
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
     /// Candidates kept after screening, each then descends.
@@ -349,6 +405,7 @@ impl Default for GlobalConfig {
             prior: PriorBox::default(),
             grid_spacing_m: [2.0, 2.0, 1.5],
             heading_spacing_deg: Some(15.0),
+            tilt_spacing_deg: Some(10.0),
             search_downsampling: 4,
             screened: 20,
             descent_iterations: 10,
@@ -359,8 +416,9 @@ impl Default for GlobalConfig {
     }
 }
 
-/// The most grid nodes a search may have (a bound on its time, not on memory).
-pub const MAX_CANDIDATES: usize = 100_000;
+/// The most candidates (grid nodes × orientations) a search may have (a bound on its
+/// time; they take 24 bytes each).
+pub const MAX_CANDIDATES: usize = 1_000_000;
 
 /// The most headings a search may try at each node (0.1° apart around the circle).
 pub const MAX_HEADINGS: usize = 3600;
@@ -382,6 +440,14 @@ impl GlobalConfig {
             return bad(
                 "global.heading_spacing_deg",
                 format!("must be in (0, 360], got {s}"),
+            );
+        }
+        if let Some(s) = self.tilt_spacing_deg
+            && !(s > 0.0 && s <= 180.0)
+        {
+            return bad(
+                "global.tilt_spacing_deg",
+                format!("must be in (0, 180], got {s}"),
             );
         }
         if !(1..=16).contains(&self.search_downsampling) {

@@ -13,7 +13,7 @@ pub mod track;
 
 pub use config::{Method, Robust, VvsConfig};
 pub use error::VvsError;
-pub use global::{GlobalConfig, PriorBox, SearchReport, turned_about_optical_axis};
+pub use global::{GlobalConfig, PriorBox, SearchReport, turned, turned_about_optical_axis};
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;

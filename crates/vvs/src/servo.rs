@@ -119,6 +119,7 @@ pub struct Servo<'a> {
     rows7: Vec<[f32; 7]>,
     scratch: Vec<f32>,
     search_desired: Vec<f32>,
+    search_weights: Vec<f32>,
     rows9: Vec<[f32; 9]>,
     columns: [Vec<f32>; 2],
     vignetting_start: [f64; 2],
@@ -153,6 +154,7 @@ impl<'a> Servo<'a> {
             rows7: Vec::new(),
             scratch: Vec::new(),
             search_desired: Vec::new(),
+            search_weights: Vec::new(),
             rows9: Vec::new(),
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
@@ -313,49 +315,88 @@ impl<'a> Servo<'a> {
             desired.downsampled(factor, &self.levels[search].camera)?
         };
 
-        // Screening: the cost of every node at low resolution, at every heading (the
-        // desired image turned back by each heading, one after the other in
-        // `search_desired`).
-        let headings = prior.headings_rad(settings.heading_spacing_deg)?;
+        // Screening: the cost of every node at low resolution, at every orientation
+        // (heading × tilts: the desired image turned back by each, one after the other
+        // in `search_desired`, the samples compared in `search_weights`).
+        let tilts = [
+            prior.tilts_rad(0, settings.tilt_spacing_deg)?,
+            prior.tilts_rad(1, settings.tilt_spacing_deg)?,
+        ];
+        let headings: Vec<[f64; 3]> = prior
+            .headings_rad(settings.heading_spacing_deg)?
+            .into_iter()
+            .flat_map(|h| {
+                let tilts = &tilts;
+                tilts[0]
+                    .iter()
+                    .flat_map(move |&x| tilts[1].iter().map(move |&y| [x, y, h]))
+            })
+            .collect();
         if nodes.len() * headings.len() > MAX_CANDIDATES {
             return Err(VvsError::Config {
                 name: "global.heading_spacing_deg",
                 message: format!(
-                    "{} positions × {} headings is more than {MAX_CANDIDATES} candidates",
+                    "{} positions × {} orientations is more than {MAX_CANDIDATES} candidates",
                     nodes.len(),
                     headings.len()
                 ),
             });
         }
-        // The desired PGM of every heading is kept (4 bytes a sample): at most 256 MB.
+        // The desired PGM and weights of every orientation are kept (8 bytes a sample):
+        // at most 512 MB.
         let samples = self.levels[search].pgm.samples().len();
         if headings.len().saturating_mul(samples) > 1 << 26 {
             return Err(VvsError::Config {
                 name: "global.heading_spacing_deg",
                 message: format!(
-                    "{} headings × {samples} samples at the search's resolution would hold more than 256 MB",
+                    "{} orientations × {samples} samples at the search's resolution would hold more than 512 MB",
                     headings.len()
                 ),
             });
         }
         self.search_desired.clear();
-        for &heading in &headings {
-            let g_star = if heading == 0.0 {
-                self.levels[search].pgm.transform(&desired_small, lambda)?
-            } else {
+        self.search_weights.clear();
+        for &[x, y, heading] in &headings {
+            let level = &mut self.levels[search];
+            let g_star = if [x, y, heading] == [0.0; 3] {
+                level.pgm.transform(&desired_small, lambda)?
+            } else if [x, y] == [0.0; 2] {
                 let turned = crate::global::turned_about_optical_axis(
                     &desired_small,
-                    &self.levels[search].camera,
+                    &level.camera,
                     -heading,
                 )?;
-                self.levels[search].pgm.transform(&turned, lambda)?
+                level.pgm.transform(&turned, lambda)?
+            } else {
+                // A tilted view loses part of the field: compare only the samples
+                // farther than 2λ from what the turn leaves unobserved.
+                let rotation = Isometry3::from_pose_vector([0.0, 0.0, 0.0, x, y, heading])?;
+                let turned = crate::global::turned(
+                    &desired_small,
+                    &level.camera,
+                    rotation.rotation.inverse(),
+                )?;
+                let radius = (2.0 * lambda).ceil() as usize;
+                let clear = clear_of_missing(&level.camera, &turned.valid, radius);
+                let at = self.search_weights.len();
+                self.search_weights
+                    .resize(at + level.pgm.samples().len(), 1.0);
+                for (w, &k) in self.search_weights[at..]
+                    .iter_mut()
+                    .zip(level.pgm.samples())
+                {
+                    *w = if clear[k as usize] { 1.0 } else { 0.0 };
+                }
+                level.pgm.transform(&turned, lambda)?
             };
             self.search_desired.extend_from_slice(g_star);
+            self.search_weights.resize(self.search_desired.len(), 1.0);
         }
         let node_pose = |index: usize, heading: usize| {
             let position = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
-            match Isometry3::from_pose_vector([0.0, 0.0, 0.0, 0.0, 0.0, headings[heading]]) {
-                Ok(turn) if headings[heading] != 0.0 => position * turn,
+            let [x, y, h] = headings[heading];
+            match Isometry3::from_pose_vector([0.0, 0.0, 0.0, x, y, h]) {
+                Ok(turn) if [x, y, h] != [0.0; 3] => position * turn,
                 _ => position,
             }
         };
@@ -455,7 +496,7 @@ impl<'a> Servo<'a> {
             refinements: kept.len(),
             descent_iterations,
             chosen_node_m,
-            chosen_heading_deg: chosen_node_m.map(|_| headings[chosen_heading].to_degrees()),
+            chosen_heading_deg: chosen_node_m.map(|_| headings[chosen_heading][2].to_degrees()),
             chosen_rank,
             refined_costs,
             phase_times_s: [screening_s, descents_s, 0.0],
@@ -519,20 +560,35 @@ impl<'a> Servo<'a> {
             return Ok(());
         }
         let g = pgm.transform(frame, lambda)?;
-        let n = g.len().max(1) as f64;
-        for (cost, desired) in costs
+        let n = g.len().max(1);
+        for ((cost, desired), weights) in costs
             .iter_mut()
-            .zip(self.search_desired.chunks_exact(g.len().max(1)))
+            .zip(self.search_desired.chunks_exact(n))
+            .zip(self.search_weights.chunks_exact(n))
         {
-            let sum: f64 = g
-                .iter()
-                .zip(desired)
-                .map(|(&a, &b)| {
+            if weights.iter().all(|&w| w == 1.0) {
+                let sum: f64 = g
+                    .iter()
+                    .zip(desired)
+                    .map(|(&a, &b)| {
+                        let e = f64::from(a - b);
+                        e * e
+                    })
+                    .sum();
+                *cost = sum / n as f64;
+            } else {
+                let (mut sum, mut count) = (0.0f64, 0.0f64);
+                for ((&a, &b), &w) in g.iter().zip(desired).zip(weights) {
                     let e = f64::from(a - b);
-                    e * e
-                })
-                .sum();
-            *cost = sum / n;
+                    sum += f64::from(w) * e * e;
+                    count += f64::from(w);
+                }
+                *cost = if count > 0.0 {
+                    sum / count
+                } else {
+                    f64::INFINITY
+                };
+            }
         }
         Ok(())
     }
@@ -1015,4 +1071,32 @@ fn tukey_weights(residuals: &[f32], c: f32, weights: &mut [f32], scratch: &mut V
             0.0
         };
     }
+}
+
+/// Per pixel: valid and no valid-but-unobserved pixel within `radius` (a square window),
+/// by a summed-area table of the missing pixels.
+fn clear_of_missing(camera: &Camera, observed: &[bool], radius: usize) -> Vec<bool> {
+    let (w, h) = (camera.width() as usize, camera.height() as usize);
+    let valid = camera.valid_pixels();
+    let mut table = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut row = 0u32;
+        for x in 0..w {
+            let k = y * w + x;
+            row += u32::from(valid[k] && !observed[k]);
+            table[(y + 1) * (w + 1) + x + 1] = table[y * (w + 1) + x + 1] + row;
+        }
+    }
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        let (y0, y1) = (y.saturating_sub(radius), (y + radius + 1).min(h));
+        for x in 0..w {
+            let (x0, x1) = (x.saturating_sub(radius), (x + radius + 1).min(w));
+            let missing = table[y1 * (w + 1) + x1] + table[y0 * (w + 1) + x0]
+                - table[y0 * (w + 1) + x1]
+                - table[y1 * (w + 1) + x0];
+            out[y * w + x] = valid[y * w + x] && observed[y * w + x] && missing == 0;
+        }
+    }
+    out
 }

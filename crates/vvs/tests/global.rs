@@ -308,7 +308,7 @@ fn headings_cover_the_box() {
     // Too many headings (or positions × headings) is refused, not allocated.
     assert!(any.headings_rad(Some(0.01)).is_err());
     let mut config = VvsConfig::default();
-    config.global.heading_spacing_deg = Some(0.2);
+    config.global.heading_spacing_deg = Some(0.1);
     let (mut servo, desired) = servo_with(config);
     let message = servo
         .localize_in_box(&desired, desired_pose(), &any)
@@ -367,4 +367,83 @@ fn global_converges_from_any_heading_with_heading_search() {
     let chosen = search.chosen_heading_deg.expect("a chosen node");
     assert!((chosen + 130.0).abs() <= 15.0, "{chosen}°");
     assert_eq!(search.candidates % 24, 0);
+}
+
+/// A turn in 3-D (tilts and heading) is a resampling too, where the turned field
+/// overlaps the original one; what it leaves unobserved is marked so.
+#[test]
+fn a_tilt_is_a_resampling_of_the_overlap() {
+    let (mut servo, _) = servo_with(VvsConfig::default());
+    let camera = fixture();
+    let straight = servo.render(&desired_pose()).unwrap();
+    let r = [
+        0.0,
+        0.0,
+        0.0,
+        15f64.to_radians(),
+        (-10f64).to_radians(),
+        0.5,
+    ];
+    let turn = ucm::Isometry3::from_pose_vector(r).unwrap();
+    let rendered = servo.render(&offset(r)).unwrap();
+    let resampled = vvs::turned(&straight, &camera, turn.rotation).unwrap();
+    let (mut error, mut unturned, mut n) = (0.0f64, 0.0f64, 0usize);
+    for k in 0..rendered.intensity.len() {
+        if resampled.valid[k] && rendered.is_observed(k) {
+            error += f64::from((resampled.intensity[k] - rendered.intensity[k]).abs());
+            unturned += f64::from((straight.intensity[k] - rendered.intensity[k]).abs());
+            n += 1;
+        }
+    }
+    let valid = camera.valid_pixel_count();
+    // Part of the field is lost to the tilt, most of it kept.
+    assert!(n > valid / 2 && n < valid * 98 / 100, "{n} of {valid}");
+    let (error, unturned) = (error / n as f64, unturned / n as f64);
+    eprintln!("mean |resampled − rendered| {error:.4}, unturned {unturned:.4}");
+    assert!(
+        error < 0.03 && error < 0.25 * unturned,
+        "{error} vs {unturned}"
+    );
+}
+
+/// Tilts beyond the box the rules recover: from 18° and −17° of tilt, 6 m away, the
+/// search with tilts 10° apart (the default, used because the box's tilts exceed it)
+/// converges; the tilts tried are the box's at most 10° apart.
+#[test]
+fn global_converges_from_large_tilts_with_tilt_search() {
+    let steep = PriorBox {
+        translation_m: [8.0, 2.0, 1.5],
+        rotation_deg: [20.0, 20.0, 15.0],
+    };
+    let degrees = |k| -> Vec<f64> {
+        steep
+            .tilts_rad(k, Some(10.0))
+            .unwrap()
+            .iter()
+            .map(|t| (t.to_degrees() * 1e6).round() / 1e6)
+            .collect()
+    };
+    assert_eq!(degrees(0), vec![0.0, -10.0, 10.0, -20.0, 20.0]);
+    assert_eq!(
+        PriorBox::default().tilts_rad(1, Some(10.0)).unwrap(),
+        vec![0.0]
+    );
+    let r = [
+        -6.0,
+        1.5,
+        -1.0,
+        18f64.to_radians(),
+        (-17f64).to_radians(),
+        (-9f64).to_radians(),
+    ];
+    let (mut servo, desired) = servo_with(VvsConfig::default());
+    let outcome = servo.localize_in_box(&desired, offset(r), &steep).unwrap();
+    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
+    eprintln!("{dt:.5} m, {:.4}°, {:?}", dr.to_degrees(), outcome.search);
+    assert!(
+        dt < 0.02 && dr.to_degrees() < 0.5,
+        "{dt} m, {}°",
+        dr.to_degrees()
+    );
+    assert_eq!(outcome.search.unwrap().candidates % 25, 0);
 }
