@@ -113,7 +113,7 @@ impl PriorBox {
         let r = self.rotation_deg.map(f64::to_radians);
         let steps = self
             .rotation_deg
-            .map(|d| ((2.0 * d / 2.0).ceil() as usize).clamp(10, 180));
+            .map(|d| (d.ceil() as usize).clamp(10, 180)); // 2d / 2° steps
         let t = self.translation_m;
         let sample = |k: usize, i: usize| r[k] * (2.0 * i as f64 / steps[k] as f64 - 1.0);
         let mut extent = [0.0f64; 3];
@@ -492,8 +492,8 @@ pub struct SearchReport {
     /// Position of the winning node in the initial camera's frame, metres (`None`:
     /// every node diverged and the initial pose itself was refined).
     pub chosen_node_m: Option<[f64; 3]>,
-    /// Heading of the winning node relative to the initial pose, degrees (0 without
-    /// heading search; `None` with `chosen_node_m`).
+    /// Heading at which the winning node started, relative to the initial pose,
+    /// degrees (0 without heading search; `None` when `chosen_node_m` is `None`).
     pub chosen_heading_deg: Option<f64>,
     /// Rank of the winner among the refinements (0: the best descent).
     pub chosen_rank: usize,

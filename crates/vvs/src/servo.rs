@@ -322,8 +322,22 @@ impl<'a> Servo<'a> {
             prior.tilts_rad(0, settings.tilt_spacing_deg)?,
             prior.tilts_rad(1, settings.tilt_spacing_deg)?,
         ];
-        let headings: Vec<[f64; 3]> = prior
-            .headings_rad(settings.heading_spacing_deg)?
+        let heading_list = prior.headings_rad(settings.heading_spacing_deg)?;
+        // Counted before anything is allocated for them.
+        let orientations = heading_list
+            .len()
+            .saturating_mul(tilts[0].len())
+            .saturating_mul(tilts[1].len());
+        if nodes.len().saturating_mul(orientations) > MAX_CANDIDATES {
+            return Err(VvsError::Config {
+                name: "global.heading_spacing_deg",
+                message: format!(
+                    "{} positions × {orientations} orientations (headings × tilts) is more than {MAX_CANDIDATES} candidates",
+                    nodes.len(),
+                ),
+            });
+        }
+        let headings: Vec<[f64; 3]> = heading_list
             .into_iter()
             .flat_map(|h| {
                 let tilts = &tilts;
@@ -332,16 +346,6 @@ impl<'a> Servo<'a> {
                     .flat_map(move |&x| tilts[1].iter().map(move |&y| [x, y, h]))
             })
             .collect();
-        if nodes.len() * headings.len() > MAX_CANDIDATES {
-            return Err(VvsError::Config {
-                name: "global.heading_spacing_deg",
-                message: format!(
-                    "{} positions × {} orientations is more than {MAX_CANDIDATES} candidates",
-                    nodes.len(),
-                    headings.len()
-                ),
-            });
-        }
         // The desired PGM and weights of every orientation are kept (8 bytes a sample):
         // at most 512 MB.
         let samples = self.levels[search].pgm.samples().len();

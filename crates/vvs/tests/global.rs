@@ -315,6 +315,20 @@ fn headings_cover_the_box() {
         .unwrap_err()
         .to_string();
     assert!(message.contains("candidates"), "{message}");
+    // Tilts and headings together: counted before they are listed.
+    let mut config = VvsConfig::default();
+    config.global.heading_spacing_deg = Some(0.2);
+    config.global.tilt_spacing_deg = Some(0.06);
+    let steep = PriorBox {
+        translation_m: [0.0; 3],
+        rotation_deg: [89.0, 89.0, 180.0],
+    };
+    let (mut servo, desired) = servo_with(config);
+    let message = servo
+        .localize_in_box(&desired, desired_pose(), &steep)
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("orientations"), "{message}");
     for bad in [0.0, -5.0, f64::NAN, 400.0] {
         let mut config = VvsConfig::default();
         config.global.heading_spacing_deg = Some(bad);
