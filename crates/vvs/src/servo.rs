@@ -120,6 +120,8 @@ pub struct Servo<'a> {
     scratch: Vec<f32>,
     search_desired: Vec<f32>,
     search_weights: Vec<f32>,
+    /// Per orientation: whether only some samples are compared (a tilt).
+    search_masked: Vec<bool>,
     rows9: Vec<[f32; 9]>,
     columns: [Vec<f32>; 2],
     vignetting_start: [f64; 2],
@@ -155,6 +157,7 @@ impl<'a> Servo<'a> {
             scratch: Vec::new(),
             search_desired: Vec::new(),
             search_weights: Vec::new(),
+            search_masked: Vec::new(),
             rows9: Vec::new(),
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
@@ -324,20 +327,20 @@ impl<'a> Servo<'a> {
         ];
         let heading_list = prior.headings_rad(settings.heading_spacing_deg)?;
         // Counted before anything is allocated for them.
-        let orientations = heading_list
+        let orientation_count = heading_list
             .len()
             .saturating_mul(tilts[0].len())
             .saturating_mul(tilts[1].len());
-        if nodes.len().saturating_mul(orientations) > MAX_CANDIDATES {
+        if nodes.len().saturating_mul(orientation_count) > MAX_CANDIDATES {
             return Err(VvsError::Config {
                 name: "global.heading_spacing_deg",
                 message: format!(
-                    "{} positions × {orientations} orientations (headings × tilts) is more than {MAX_CANDIDATES} candidates",
+                    "{} positions × {orientation_count} orientations (headings × tilts) is more than {MAX_CANDIDATES} candidates",
                     nodes.len(),
                 ),
             });
         }
-        let headings: Vec<[f64; 3]> = heading_list
+        let orientations: Vec<[f64; 3]> = heading_list
             .into_iter()
             .flat_map(|h| {
                 let tilts = &tilts;
@@ -349,22 +352,25 @@ impl<'a> Servo<'a> {
         // The desired PGM and weights of every orientation are kept (8 bytes a sample):
         // at most 512 MB.
         let samples = self.levels[search].pgm.samples().len();
-        if headings.len().saturating_mul(samples) > 1 << 26 {
+        if orientations.len().saturating_mul(samples) > 1 << 26 {
             return Err(VvsError::Config {
                 name: "global.heading_spacing_deg",
                 message: format!(
                     "{} orientations × {samples} samples at the search's resolution would hold more than 512 MB",
-                    headings.len()
+                    orientations.len()
                 ),
             });
         }
         self.search_desired.clear();
         self.search_weights.clear();
-        for &[x, y, heading] in &headings {
+        self.search_masked.clear();
+        for &[x, y, heading] in &orientations {
             let level = &mut self.levels[search];
             let g_star = if [x, y, heading] == [0.0; 3] {
                 level.pgm.transform(&desired_small, lambda)?
             } else if [x, y] == [0.0; 2] {
+                // A turn about the optical axis keeps the field: every sample compared
+                // (its own formula, as measured before tilts were searched).
                 let turned = crate::global::turned_about_optical_axis(
                     &desired_small,
                     &level.camera,
@@ -393,25 +399,27 @@ impl<'a> Servo<'a> {
                 }
                 level.pgm.transform(&turned, lambda)?
             };
+            self.search_masked
+                .push(self.search_weights.len() > self.search_desired.len());
             self.search_desired.extend_from_slice(g_star);
             self.search_weights.resize(self.search_desired.len(), 1.0);
         }
-        let node_pose = |index: usize, heading: usize| {
+        let node_pose = |index: usize, orientation: usize| {
             let position = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
-            let [x, y, h] = headings[heading];
+            let [x, y, h] = orientations[orientation];
             match Isometry3::from_pose_vector([0.0, 0.0, 0.0, x, y, h]) {
                 Ok(turn) if [x, y, h] != [0.0; 3] => position * turn,
                 _ => position,
             }
         };
         let mut screened: Vec<(f64, usize, usize)> =
-            Vec::with_capacity(nodes.len() * headings.len());
-        let mut costs = vec![f64::INFINITY; headings.len()];
+            Vec::with_capacity(nodes.len() * orientations.len());
+        let mut costs = vec![f64::INFINITY; orientations.len()];
         for index in 0..nodes.len() {
             self.search_cost(search, &node_pose(index, 0), lambda, &mut costs)?;
-            for (heading, &cost) in costs.iter().enumerate() {
+            for (orientation, &cost) in costs.iter().enumerate() {
                 if cost.is_finite() {
-                    screened.push((cost, index, heading));
+                    screened.push((cost, index, orientation));
                 }
             }
         }
@@ -435,8 +443,8 @@ impl<'a> Servo<'a> {
             Vec::with_capacity(screened.len());
         let mut descent_iterations = 0;
         let mut history = Vec::new();
-        for &(_, index, heading) in &screened {
-            let mut pose = node_pose(index, heading);
+        for &(_, index, orientation) in &screened {
+            let mut pose = node_pose(index, orientation);
             history.clear();
             let mut coefficients = self.vignetting_start;
             let result = self.run_stage(
@@ -449,7 +457,7 @@ impl<'a> Servo<'a> {
             )?;
             descent_iterations += result.iterations;
             if !matches!(result.stop, StopReason::Diverged(_)) && result.cost.is_finite() {
-                descended.push((result.cost, (index, heading), pose));
+                descended.push((result.cost, (index, orientation), pose));
             }
         }
         descended.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -492,15 +500,16 @@ impl<'a> Servo<'a> {
             }
         }
         let (chosen_rank, mut outcome) = best.expect("at least one refinement");
-        let (chosen, chosen_heading) = kept[chosen_rank].0;
+        let (chosen, chosen_orientation) = kept[chosen_rank].0;
         let chosen_node_m = nodes.get(chosen).copied();
         outcome.search = Some(SearchReport {
-            candidates: nodes.len() * headings.len(),
+            candidates: nodes.len() * orientations.len(),
             descents: screened.len(),
             refinements: kept.len(),
             descent_iterations,
             chosen_node_m,
-            chosen_heading_deg: chosen_node_m.map(|_| headings[chosen_heading][2].to_degrees()),
+            chosen_heading_deg: chosen_node_m
+                .map(|_| orientations[chosen_orientation][2].to_degrees()),
             chosen_rank,
             refined_costs,
             phase_times_s: [screening_s, descents_s, 0.0],
@@ -533,7 +542,7 @@ impl<'a> Servo<'a> {
     }
 
     /// The mean squared PGM residual at `world_from_camera` on level `level` against
-    /// each desired PGM of `self.search_desired` (one per heading, into `costs`;
+    /// each desired PGM of `self.search_desired` (one per orientation, into `costs`;
     /// infinite where the pose is outside the cloud's enlarged bounds or sees too
     /// little of it).
     fn search_cost(
@@ -565,12 +574,13 @@ impl<'a> Servo<'a> {
         }
         let g = pgm.transform(frame, lambda)?;
         let n = g.len().max(1);
-        for ((cost, desired), weights) in costs
+        for (((cost, desired), weights), &masked) in costs
             .iter_mut()
             .zip(self.search_desired.chunks_exact(n))
             .zip(self.search_weights.chunks_exact(n))
+            .zip(&self.search_masked)
         {
-            if weights.iter().all(|&w| w == 1.0) {
+            if !masked {
                 let sum: f64 = g
                     .iter()
                     .zip(desired)
