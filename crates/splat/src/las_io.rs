@@ -155,44 +155,24 @@ fn ends_early(error: &las::Error) -> bool {
     }
 }
 
-/// Read a LAS or LAZ file into a cloud (point spacing estimated from the data).
-pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatError> {
-    let path = path.as_ref();
-    if !path.exists() {
-        return Err(SplatError::Io {
-            path: path.to_owned(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        });
-    }
-    let io_error = |source| SplatError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let file_bytes = std::fs::metadata(path).map_err(io_error)?.len();
-    let raw = std::fs::File::open(path)
-        .map_err(io_error)
-        .and_then(|file| {
-            las::raw::Header::read_from(std::io::BufReader::new(file)).map_err(las_error(path))
-        })?;
-    let scales = [raw.x_scale_factor, raw.y_scale_factor, raw.z_scale_factor];
-    let offsets = [raw.x_offset, raw.y_offset, raw.z_offset];
-    if !scales.iter().all(|s| s.is_finite() && *s != 0.0) || !offsets.iter().all(|o| o.is_finite())
-    {
-        return Err(SplatError::Las {
-            path: path.to_owned(),
-            source: Box::new(las::Error::Io(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!(
-                    "the header's scale factors {scales:?} must be finite and non-zero, its \
-                     offsets {offsets:?} finite"
-                ),
-            ))),
-        });
-    }
-    if raw.point_data_record_format & 0x80 != 0 {
-        check_laz_items(path, &raw)?;
-        check_laz_chunk_table(path, u64::from(raw.offset_to_point_data), file_bytes)?;
-    }
+/// What [`decode_points`] read from a file, before it becomes a cloud.
+struct Decoded {
+    header: las::Header,
+    point_format: u8,
+    version: (u8, u8),
+    bounds: (DVec3, DVec3),
+    has_rgb: bool,
+    positions: Vec<DVec3>,
+    raw_rgb: Vec<[u16; 3]>,
+    raw_intensity: Vec<u16>,
+}
+
+/// Decode a checked file's points by chunks (memory follows what the file holds).
+fn decode_points(
+    path: &Path,
+    raw: &las::raw::Header,
+    file_bytes: u64,
+) -> Result<Decoded, SplatError> {
     let mut reader = las::Reader::from_path(path).map_err(|e| {
         if ends_early(&e) {
             SplatError::Truncated {
@@ -271,6 +251,89 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
             ),
         });
     }
+    Ok(Decoded {
+        header,
+        point_format,
+        version,
+        bounds,
+        has_rgb,
+        positions,
+        raw_rgb,
+        raw_intensity,
+    })
+}
+
+/// Read a LAS or LAZ file into a cloud (point spacing estimated from the data).
+pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatError> {
+    let path = path.as_ref();
+    if !path.exists() {
+        return Err(SplatError::Io {
+            path: path.to_owned(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        });
+    }
+    let io_error = |source| SplatError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file_bytes = std::fs::metadata(path).map_err(io_error)?.len();
+    let raw = std::fs::File::open(path)
+        .map_err(io_error)
+        .and_then(|file| {
+            las::raw::Header::read_from(std::io::BufReader::new(file)).map_err(las_error(path))
+        })?;
+    let scales = [raw.x_scale_factor, raw.y_scale_factor, raw.z_scale_factor];
+    let offsets = [raw.x_offset, raw.y_offset, raw.z_offset];
+    if !scales.iter().all(|s| s.is_finite() && *s != 0.0) || !offsets.iter().all(|o| o.is_finite())
+    {
+        return Err(SplatError::Las {
+            path: path.to_owned(),
+            source: Box::new(las::Error::Io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "the header's scale factors {scales:?} must be finite and non-zero, its \
+                     offsets {offsets:?} finite"
+                ),
+            ))),
+        });
+    }
+    if raw.point_data_record_format & 0x80 != 0 {
+        check_laz_items(path, &raw)?;
+        check_laz_chunk_table(path, u64::from(raw.offset_to_point_data), file_bytes)?;
+    }
+    // The `laz` decoder asserts (panics) on some corrupt inputs instead of reporting
+    // them (an empty item list, an arithmetic-coder symbol out of range: found by our
+    // fuzzing); the checks above catch the known ones with a clear message, and any
+    // other panic inside the decoder is caught here and reported as a corrupt file.
+    // Nothing decoded survives a caught panic. (A binary built with
+    // `panic = "abort"` loses this net.)
+    let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        decode_points(path, &raw, file_bytes)
+    }))
+    .map_err(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".to_owned());
+        SplatError::Las {
+            path: path.to_owned(),
+            source: Box::new(las::Error::Io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("the point decoder failed on corrupt data ({message})"),
+            ))),
+        }
+    })??;
+    let Decoded {
+        header,
+        point_format,
+        version,
+        bounds,
+        has_rgb,
+        positions,
+        raw_rgb,
+        raw_intensity,
+    } = decoded;
     if positions.is_empty() {
         return Err(SplatError::EmptyCloud);
     }
