@@ -48,5 +48,34 @@ fn render(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, render);
+/// Issue #18's goal for the renderer: at least 100 M drawn points per second on one
+/// core at the default level of detail. Throughput in points drawn (after culling and
+/// level of detail, `RenderStats::points_drawn`) per second, the default city from the
+/// street, one thread.
+fn goal_render(c: &mut Criterion) {
+    let mut group = c.benchmark_group("goal_render_ge_100M_drawn_points_per_s");
+    group.sample_size(20);
+    let city = City::generate(&CityParams::default()).unwrap();
+    let pose = camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.1).inverse();
+    for camera_name in ["omni-320x240.toml", "omni-640x480.toml"] {
+        let camera = fixture_camera(camera_name);
+        let options = RenderOptions {
+            parallel: false,
+            ..RenderOptions::default()
+        };
+        let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        let drawn = renderer
+            .render(&city.cloud, &pose, &mut frame)
+            .unwrap()
+            .points_drawn;
+        group.throughput(Throughput::Elements(drawn as u64));
+        group.bench_function(format!("default_lod/{}", camera.width()), |b| {
+            b.iter(|| renderer.render(&city.cloud, &pose, &mut frame).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, render, goal_render);
 criterion_main!(benches);

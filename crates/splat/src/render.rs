@@ -67,11 +67,13 @@ pub struct RenderOptions {
     /// the nearest range of a pixel are averaged. Default 0.02.
     pub depth_band: f32,
     /// Level of detail: draw cells no denser than this many pixels between
-    /// neighbouring points on the image (`None`: draw every point). Default `Some(0.5)`,
-    /// about four samples per pixel.
+    /// neighbouring points on the image (`None`: draw every point). Default `Some(0.65)`,
+    /// about 2.4 samples per pixel where a cell is thinned (with the default splat
+    /// size: closer to a pixel-integrated reference than 0.5 px with splats of 1.5,
+    /// and its PGMs too, with 25 % fewer points; `docs/RESULTS.md`, session 13).
     pub lod_spacing_px: Option<f32>,
     /// Splat size factor over the nominal footprint (≥ 1 fills the gaps that the
-    /// random jitter of a real sampling leaves). Default 1.5.
+    /// random jitter of a real sampling leaves). Default 1.25.
     pub splat_scale: f32,
     /// Largest splat half-width, pixels (bounds the cost of points very close to the
     /// camera). Default 8.
@@ -80,8 +82,9 @@ pub struct RenderOptions {
     /// either way. Default true.
     pub parallel: bool,
     /// Fill isolated holes: a pixel of the valid region with no sample but at least 6
-    /// of its 8 neighbours hit takes their mean intensity and nearest range (the gaps a
-    /// random subsample or a jittered sampling leaves). Default true.
+    /// of its 8 neighbours hit (at the valid region's edge: every valid neighbour, at
+    /// least 3) takes their mean intensity and nearest range (the gaps a random
+    /// subsample or a jittered sampling leaves). Default true.
     pub fill_holes: bool,
     /// Skip cells hidden behind what is already drawn (exact: the image is the same
     /// with or without it; only the time changes). Cameras with lens distortion are
@@ -94,8 +97,8 @@ impl Default for RenderOptions {
         Self {
             background: 0.85,
             depth_band: 0.02,
-            lod_spacing_px: Some(0.5),
-            splat_scale: 1.5,
+            lod_spacing_px: Some(0.65),
+            splat_scale: 1.25,
             max_splat_radius_px: 8,
             parallel: true,
             fill_holes: true,
@@ -439,6 +442,7 @@ impl Renderer {
                 }
                 let mut sum = 0.0f32;
                 let mut count = 0;
+                let mut masked = 0;
                 let mut nearest = f32::INFINITY;
                 for dj in [-1isize, 0, 1] {
                     for di in [-1isize, 0, 1] {
@@ -448,9 +452,11 @@ impl Renderer {
                             nearest = nearest.min(frame.range_m[n]);
                             count += 1;
                         }
+                        masked += usize::from(self.status[n] == PixelStatus::Masked);
                     }
                 }
-                if count >= 6 {
+                // At the valid region's edge: every valid neighbour (at least 3) hit.
+                if count >= 6 || (count >= 3 && count + masked == 8) {
                     frame.intensity[k] = sum / count as f32;
                     frame.range_m[k] = nearest; // the nearest neighbour's mean range
                     frame.status[k] = PixelStatus::Hit;

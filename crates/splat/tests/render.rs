@@ -221,7 +221,7 @@ fn city_has_no_holes_below_the_horizon() {
         (0.5, 30.0, 2.2, 1.6),
     ] {
         let pose = camera_looking_down(DVec3::new(x, y, z), heading);
-        for lod in [Some(0.5), None] {
+        for lod in [RenderOptions::default().lod_spacing_px, Some(0.5), None] {
             let frame = render_city(
                 &camera,
                 &pose,
