@@ -97,7 +97,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .zip(&reference)
                 .map(|(a, b)| f64::from(a - b).powi(2))
                 .sum();
-            let v: f64 = reference.iter().map(|&b| (f64::from(b) - mean).powi(2)).sum();
+            let v: f64 = reference
+                .iter()
+                .map(|&b| (f64::from(b) - mean).powi(2))
+                .sum();
             g_view[k] = (e / v.max(f64::MIN_POSITIVE)).sqrt();
             g_err[k] += e;
             g_var[k] += v;
