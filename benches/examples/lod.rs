@@ -3,12 +3,10 @@
 //! 320×240 on one thread and compares them with a reference drawn at 4× the resolution
 //! from every point (larger splats allowed) and averaged over 4×4 blocks: the mean
 //! intensity error, the pixels hit in one image only, the mean gradient magnitude
-//! (pixel-scale texture; the reference's is printed first) and the RMS error of the
+//! (pixel-scale texture; the reference's in parentheses) and the RMS error of the
 //! PGM `G(λ)` at λ = 1, 5, 15 relative to the RMS variation of the reference's.
-//! `cargo run --release -p splat --example lod -- [LOD_SPACING_PX|all] [SPLAT_SCALE]`
-//! (defaults: the renderer's, 0.65 px and 1.25; from the workspace root).
-
-mod common;
+//! `cargo run --release -p benches --example lod -- [LOD_SPACING_PX|all] [SPLAT_SCALE]`
+//! (defaults: the renderer's, 0.65 px and 1.25).
 
 use frame::{Frame, PixelStatus};
 use splat::{RenderOptions, Renderer};
@@ -33,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
 
     let city = City::generate(&CityParams::default())?;
-    let camera = ucm::Camera::load_toml("fixtures/omni-320x240.toml")?;
+    let camera = benches::fixture_camera("omni-320x240.toml");
     let fine = camera.rescaled(4)?;
     let mut reference = Renderer::new(
         fine.clone(),
@@ -62,8 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut total_points, mut total_ms, mut total_err, mut total_n) = (0, 0.0, 0.0, 0);
     let (mut total_grad, mut total_grad_ref) = (0.0, 0.0);
     let (mut g_err, mut g_var) = ([0.0f64; 3], [0.0f64; 3]);
-    for view in common::STREET_VIEWS {
-        let pose = common::camera_from_world(view);
+    for view in benches::STREET_VIEWS {
+        let pose = benches::camera_from_world(view);
         let (x, y, z, _) = view;
         reference.render(&city.cloud, &pose, &mut fine_frame)?;
         let truth = fine_frame.downsampled(4, &camera)?;

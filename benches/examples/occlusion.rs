@@ -1,9 +1,7 @@
 //! What occlusion culling saves on five street poses of the synthetic city, at 320×240
 //! on one thread: cells and points skipped, render time (best of 3 × 5 renders) with
 //! and without it, and whether the frames are identical.
-//! `cargo run --release -p splat --example occlusion` (from the workspace root).
-
-mod common;
+//! `cargo run --release -p benches --example occlusion`.
 
 use frame::Frame;
 use splat::{RenderOptions, Renderer};
@@ -11,7 +9,7 @@ use world::city::{City, CityParams};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let city = City::generate(&CityParams::default())?;
-    let camera = ucm::Camera::load_toml("fixtures/omni-320x240.toml")?;
+    let camera = benches::fixture_camera("omni-320x240.toml");
     let renderer = |occlusion_culling| {
         let options = RenderOptions {
             parallel: false,
@@ -22,8 +20,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mut renderers = [renderer(false)?, renderer(true)?];
     let mut frames = [Frame::for_camera(&camera), Frame::for_camera(&camera)];
-    for view in &common::STREET_VIEWS[..5] {
-        let pose = common::camera_from_world(*view);
+    for view in &benches::STREET_VIEWS[..5] {
+        let pose = benches::camera_from_world(*view);
         let (x, y, z, _) = *view;
         let mut best_ms = [f64::MAX; 2];
         let mut stats = [Default::default(); 2];
