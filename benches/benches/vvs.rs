@@ -3,10 +3,10 @@
 //!
 //! Each sample runs Rule2 (Convolved Jacobian) for a fixed number of step-1
 //! iterations from 5 cm and 1° off a street view (the stall test off and the
-//! convergence thresholds at 1e-12, so that every run does the same work), on one thread. The throughput is in
-//! iterations per second: one iteration takes its inverse. A run's fixed costs (the
-//! desired image's PGM, the first rendering) are included, spread over the
-//! iterations.
+//! convergence thresholds at 1e-12, so that every run does the same work), on one
+//! thread. The throughput is in iterations per second: one iteration takes its
+//! inverse. A run's fixed costs (the desired image's PGM, the first rendering) are
+//! included, spread over the iterations.
 
 use benches::fixture_camera;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};

@@ -324,29 +324,20 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
             ))),
         }
     })??;
-    let Decoded {
-        header,
-        point_format,
-        version,
-        bounds,
-        has_rgb,
-        positions,
-        raw_rgb,
-        raw_intensity,
-    } = decoded;
-    if positions.is_empty() {
+    if decoded.positions.is_empty() {
         return Err(SplatError::EmptyCloud);
     }
     // The origin comes from the data (the header's bounds may lie): the minimum
     // corner, rounded down to the metre.
-    let origin = positions
+    let origin = decoded
+        .positions
         .iter()
         .fold(DVec3::splat(f64::INFINITY), |m, p| m.min(*p))
         .floor();
 
-    let (intensities, colors, max_color_value, intensity_source) = match has_rgb {
+    let (intensities, colors, max_color_value, intensity_source) = match decoded.has_rgb {
         true => {
-            let raw = raw_rgb;
+            let raw = decoded.raw_rgb;
             let max = raw.iter().flatten().copied().max().unwrap_or(0);
             let scale = if max <= 255 {
                 ColorScale::EightBit
@@ -371,7 +362,7 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
             )
         }
         false => {
-            let raw = raw_intensity;
+            let raw = decoded.raw_intensity;
             let max = raw.iter().copied().max().unwrap_or(0);
             if max == 0 {
                 (
@@ -391,14 +382,14 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
             }
         }
     };
-    let cloud = PointCloud::from_points(origin, &positions, &intensities, colors, None)?;
+    let cloud = PointCloud::from_points(origin, &decoded.positions, &intensities, colors, None)?;
     Ok((
         cloud,
         LasInfo {
-            header_point_count: header.number_of_points(),
-            point_format,
-            version,
-            bounds,
+            header_point_count: decoded.header.number_of_points(),
+            point_format: decoded.point_format,
+            version: decoded.version,
+            bounds: decoded.bounds,
             max_color_value,
             intensity_source,
         },
