@@ -57,6 +57,9 @@ use frame::{Frame, PixelStatus};
 
 use crate::{PointCloud, SplatError};
 
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+mod sse2;
+
 /// Renderer settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -521,8 +524,10 @@ impl Renderer {
 
     /// Whether every pixel that a point of `candidate` could cover already holds a
     /// range nearer than the cell by more than the depth band (then the cell can
-    /// change nothing). Conservative: `false` whenever in doubt.
-    fn occluded(&self, candidate: &Candidate, view: &View) -> bool {
+    /// change nothing). Conservative: `false` whenever in doubt. Takes the depth
+    /// buffer mutably (no other thread draws meanwhile) so that its rows are read as
+    /// plain integers, several at a time.
+    fn occluded(&mut self, candidate: &Candidate, view: &View) -> bool {
         let Some([u0, u1, v0, v1]) = self.image_rect(candidate, view) else {
             return false;
         };
@@ -539,11 +544,12 @@ impl Renderer {
         };
         let mut farthest = 0u32;
         for row in v0..=v1 {
-            let depth = &self.depth[row * w + u0..=row * w + u1];
+            let depth = &mut self.depth[row * w + u0..=row * w + u1];
             let valid = &self.valid_bits[row * w + u0..=row * w + u1];
-            for (d, v) in depth.iter().zip(valid) {
-                farthest = farthest.max(d.load(Ordering::Relaxed) & v);
-            }
+            farthest = depth
+                .iter_mut()
+                .zip(valid)
+                .fold(farthest, |f, (d, v)| f.max(*d.get_mut() & v));
             // The farthest range only grows: stop at the first row that decides.
             if !hides(farthest) {
                 return false;
@@ -796,16 +802,43 @@ fn half_width(size: f32, max_radius: i32) -> i32 {
     (t + i32::from((t as f32) < h)).min(max_radius)
 }
 
+/// How many cells ahead of the one being drawn [`warm`] asks for points.
+const WARM_AHEAD: usize = 2;
+
 /// Points projected at a time by [`project_block`].
 const BLOCK: usize = 64;
 /// Points projected at a time at the end of a cell (fewer wasted on padding: level of
 /// detail leaves most cells with a count that is not a multiple of [`BLOCK`]).
 const TAIL: usize = 8;
 
+/// The splats of `N` points, one array per field: what [`project_block`] computes
+/// several points at a time before packing them into [`Splat`]s.
+struct Lanes<const N: usize> {
+    iu: [i32; N],
+    iv: [i32; N],
+    /// [`NOT_DRAWN`] where the point is not seen.
+    half: [i32; N],
+    range: [f32; N],
+    intensity: [i32; N],
+}
+
+impl<const N: usize> Lanes<N> {
+    fn new() -> Self {
+        Self {
+            iu: [0; N],
+            iv: [0; N],
+            half: [0; N],
+            range: [0.0; N],
+            intensity: [0; N],
+        }
+    }
+}
+
 /// [`project_point`] of `N` points of a camera without lens distortion, with the
-/// same operations in the same order (so bit for bit the same splats), but without a
-/// branch, so that the compiler computes several points per instruction. Unseen points
-/// get `half = NOT_DRAWN` (their other fields are then meaningless).
+/// same operations in the same order (so bit for bit the same splats), several points
+/// per instruction: explicit SSE2 on x86-64 ([`sse2::project_lanes`]), elsewhere
+/// branch-free code that the compiler vectorises ([`project_lanes_portable`]). Unseen
+/// points get `half = NOT_DRAWN` (their other fields are then meaningless).
 #[inline(always)]
 fn project_block<const N: usize>(
     points: &[[f32; 4]; N],
@@ -813,13 +846,34 @@ fn project_block<const N: usize>(
     view: &View,
     out: &mut [Splat; N],
 ) {
+    let mut lanes = Lanes::<N>::new();
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    sse2::project_lanes(points, footprint, view, &mut lanes);
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    project_lanes_portable(points, footprint, view, &mut lanes);
+    for k in 0..N {
+        out[k] = Splat {
+            iu: lanes.iu[k] as i16,
+            iv: lanes.iv[k] as i16,
+            half: lanes.half[k] as u16,
+            intensity: lanes.intensity[k] as u16,
+            range: lanes.range[k],
+        };
+    }
+}
+
+/// The lanes of [`project_block`] without explicit vector instructions: branch-free,
+/// so that the compiler computes several points per instruction where it can.
+#[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
+#[inline(always)]
+fn project_lanes_portable<const N: usize>(
+    points: &[[f32; 4]; N],
+    footprint: f32,
+    view: &View,
+    out: &mut Lanes<N>,
+) {
     let r = view.rotation;
     let t = view.translation;
-    let mut iu = [0i32; N];
-    let mut iv = [0i32; N];
-    let mut half = [0i32; N];
-    let mut range = [0f32; N];
-    let mut intensity = [0i32; N];
     for k in 0..N {
         let [x, y, z, grey] = points[k];
         // `Mat3 * Vec3 + Vec3` as glam computes it.
@@ -837,24 +891,15 @@ fn project_block<const N: usize>(
         let (pu, pv) = (round_px(u), round_px(v));
         let in_image =
             (pu + h >= 0) & (pv + h >= 0) & (pu - h < view.width) & (pv - h < view.height);
-        iu[k] = pu;
-        iv[k] = pv;
-        half[k] = if in_domain & in_image {
+        out.iu[k] = pu;
+        out.iv[k] = pv;
+        out.half[k] = if in_domain & in_image {
             h
         } else {
             i32::from(NOT_DRAWN)
         };
-        range[k] = rho;
-        intensity[k] = floor_small(limit(grey * INTENSITY_SCALE + 0.5, 0.0, 65535.0));
-    }
-    for k in 0..N {
-        out[k] = Splat {
-            iu: iu[k] as i16,
-            iv: iv[k] as i16,
-            half: half[k] as u16,
-            intensity: intensity[k] as u16,
-            range: range[k],
-        };
+        out.range[k] = rho;
+        out.intensity[k] = floor_small(limit(grey * INTENSITY_SCALE + 0.5, 0.0, 65535.0));
     }
 }
 
@@ -935,7 +980,11 @@ fn project_and_depth(
     let mut kept = 0;
     let mut block = [Splat::default(); TAIL];
     let mut input = [[0f32; 4]; TAIL];
-    for cell in cells {
+    let mut warmed = 0u32;
+    for (index, cell) in cells.iter().enumerate() {
+        if let Some(next) = cells.get(index + WARM_AHEAD) {
+            warmed ^= warm(points, next);
+        }
         let start = cell.start as usize;
         let footprint = cell.spacing_m * view.alpha * view.splat_scale;
         let cell_points = &points[start..start + cell.count as usize];
@@ -983,7 +1032,28 @@ fn project_and_depth(
             }
         }
     }
+    // Keep the warming loads (an optimiser could drop loads whose value is unused).
+    std::hint::black_box(warmed);
     kept
+}
+
+/// Ask for the cache lines of the points a cell will draw ahead of time, so that their
+/// memory latencies overlap the current cells' arithmetic (the cells are drawn front
+/// to back, not in memory order, so each starts a new stream that the hardware
+/// prefetcher would only follow after a few misses): a prefetch instruction per line
+/// on x86-64, elsewhere a load per line (whose value is returned, xor-ed, so that it is
+/// not optimised away).
+#[inline(always)]
+fn warm(points: &[[f32; 4]], cell: &DrawCell) -> u32 {
+    let start = cell.start as usize;
+    let lines = points[start..start + cell.count as usize].iter().step_by(4);
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
+    {
+        lines.for_each(safe_arch::prefetch_t0);
+        0
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
+    lines.fold(0, |acc, p| acc ^ p[0].to_bits())
 }
 
 /// Pass 2 over the splats of pass 1: add each sample to the pixels it covers where it
@@ -1125,6 +1195,22 @@ mod tests {
                         prop_assert_eq!(fields(got), fields(&want), "point {:?}", p);
                     }
                     None => prop_assert_eq!(got.half, NOT_DRAWN, "point {:?}", p),
+                }
+            }
+            // The portable kernel (the one of other architectures) too.
+            let mut lanes = Lanes::<BLOCK>::new();
+            project_lanes_portable(&points, footprint, &view, &mut lanes);
+            for (k, got) in block.iter().enumerate() {
+                prop_assert_eq!(lanes.half[k] as u16, got.half);
+                if got.half != NOT_DRAWN {
+                    let portable = (
+                        lanes.iu[k] as i16,
+                        lanes.iv[k] as i16,
+                        lanes.half[k] as u16,
+                        lanes.intensity[k] as u16,
+                        lanes.range[k].to_bits(),
+                    );
+                    prop_assert_eq!(portable, fields(got));
                 }
             }
         }
