@@ -172,6 +172,21 @@ struct Candidate {
     nearest_m: f32,
 }
 
+/// The largest singular value of `[[a, s], [0, b]]`.
+fn affine_norm(a: f64, b: f64, s: f64) -> f32 {
+    let trace = a * a + s * s + b * b;
+    let det = a * b;
+    ((trace + (trace * trace - 4.0 * det * det).max(0.0).sqrt()) * 0.5).sqrt() as f32
+}
+
+/// Side of the tiles of the occlusion test, pixels.
+const TILE: usize = 8;
+
+/// Tiles along an image side of `pixels`.
+fn tiles(pixels: u32) -> usize {
+    (pixels as usize).div_ceil(TILE)
+}
+
 /// The first batch of points drawn before any occlusion test, and the smallest batch.
 const MIN_BATCH_POINTS: usize = 16_384;
 
@@ -191,7 +206,11 @@ struct View {
     width: i32,
     height: i32,
     splat_scale: f32,
-    max_radius: i32,
+    /// Largest splat width, pixels (`2 · max_splat_radius_px + 1`).
+    max_width: i32,
+    /// Largest singular value of the affine part of the intrinsics
+    /// `[[α_u, skew], [0, α_v]]` (how much it can stretch a length).
+    affine_norm: f32,
     depth_band: f32,
 }
 
@@ -211,6 +230,13 @@ pub struct Renderer {
     /// Per pixel: all ones where valid, zero where masked (masked pixels never keep a
     /// cell from being culled).
     valid_bits: Vec<u32>,
+    /// Per tile of `TILE × TILE` pixels: the farthest key of its valid pixels (as in
+    /// [`Renderer::occluded`]) when `tile_batch` equals the batch being tested, else
+    /// stale (recomputed on demand: depths change only while a batch is drawn).
+    tile_farthest: Vec<u32>,
+    tile_batch: Vec<u32>,
+    /// The batch being tested (starts at 1; `tile_batch` starts at 0).
+    batch: u32,
     theta_min: f32,
     theta_max: f32,
 }
@@ -254,6 +280,7 @@ impl Renderer {
         } else {
             (0.0, std::f32::consts::PI)
         };
+        let tile_count = tiles(camera.width()) * tiles(camera.height());
         let valid_bits = camera
             .valid_pixels()
             .iter()
@@ -271,6 +298,9 @@ impl Renderer {
             splats: Vec::new(),
             status: vec![PixelStatus::Sky; n],
             valid_bits,
+            tile_farthest: vec![0; tile_count],
+            tile_batch: vec![0; tile_count],
+            batch: 0,
             theta_min,
             theta_max,
         })
@@ -333,7 +363,8 @@ impl Renderer {
             width: self.camera.width() as i32,
             height: self.camera.height() as i32,
             splat_scale: self.options.splat_scale,
-            max_radius: self.options.max_splat_radius_px as i32,
+            max_width: 2 * self.options.max_splat_radius_px.min(16_000) as i32 + 1,
+            affine_norm: affine_norm(i.alpha_u, i.alpha_v, i.skew),
             depth_band: self.options.depth_band,
         };
 
@@ -359,6 +390,12 @@ impl Renderer {
         while next < self.candidates.len() {
             // The next batch, front to back, tested against what is drawn so far.
             let target = MIN_BATCH_POINTS.max(points_drawn / 2);
+            // Every tile's farthest key is stale once a batch is drawn.
+            self.batch = self.batch.wrapping_add(1);
+            if self.batch == 0 {
+                self.tile_batch.fill(0);
+                self.batch = 1;
+            }
             let first = self.draw.len();
             let mut batch_points = 0;
             while next < self.candidates.len() && batch_points < target {
@@ -542,6 +579,21 @@ impl Renderer {
         let hides = |farthest: u32| {
             f32::from_bits(farthest) * (1.0 + view.depth_band) * (1.0 + 1e-4) < nearest
         };
+        // First the tiles holding the rectangle (each tile's farthest key bounds its
+        // pixels'): most occluded cells are decided there, without reading every pixel.
+        let tiles_wide = tiles(self.camera.width());
+        let mut hidden_by_tiles = true;
+        'tiles: for tv in v0 / TILE..=v1 / TILE {
+            for tu in u0 / TILE..=u1 / TILE {
+                if !hides(self.tile_farthest(tv * tiles_wide + tu, tu, tv)) {
+                    hidden_by_tiles = false;
+                    break 'tiles;
+                }
+            }
+        }
+        if hidden_by_tiles {
+            return true;
+        }
         let mut farthest = 0u32;
         for row in v0..=v1 {
             let depth = &mut self.depth[row * w + u0..=row * w + u1];
@@ -558,23 +610,90 @@ impl Renderer {
         true
     }
 
+    /// The farthest key of the valid pixels of tile `index` (column `tu`, row `tv`),
+    /// recomputed if a batch was drawn since.
+    fn tile_farthest(&mut self, index: usize, tu: usize, tv: usize) -> u32 {
+        if self.tile_batch[index] != self.batch {
+            let (w, h) = (self.camera.width() as usize, self.camera.height() as usize);
+            let (u0, u1) = (tu * TILE, ((tu + 1) * TILE).min(w));
+            let mut farthest = 0u32;
+            for row in tv * TILE..((tv + 1) * TILE).min(h) {
+                let depth = &mut self.depth[row * w + u0..row * w + u1];
+                let valid = &self.valid_bits[row * w + u0..row * w + u1];
+                farthest = depth
+                    .iter_mut()
+                    .zip(valid)
+                    .fold(farthest, |f, (d, v)| f.max(*d.get_mut() & v));
+            }
+            self.tile_farthest[index] = farthest;
+            self.tile_batch[index] = self.batch;
+        }
+        self.tile_farthest[index]
+    }
+
     /// A pixel rectangle `[u0, u1, v0, v1]` (inclusive, clipped to the image; empty if
     /// outside it) holding every pixel that a splat of a point of the candidate's
     /// bounding sphere can cover, or `None` if it cannot be bounded (the sphere holds
     /// the centre, or reaches the edge of the model's domain).
     ///
-    /// The UCM maps a direction at angle `θ` off the axis and azimuth `φ` to the
-    /// normalised point `r(θ) (cos φ, sin φ)` with `r(θ) = sin θ / (cos θ + ξ)`,
-    /// increasing over the drawable domain; the sphere's directions form a cone of
-    /// half-angle `β = asin(R/d)`, hence `θ ∈ [θc − β, θc + β]` and
-    /// `|φ − φc| ≤ asin(sin β / sin θc)`: an annular sector, whose bounding box the
-    /// affine intrinsics map to the image.
+    /// The sphere's directions form a cone of half-angle `β = asin(R/d)` around the
+    /// centre's, at angle `θc` off the axis. For `ξ ≤ 1` (no transcendental function):
+    /// the UCM's projection of the unit sphere onto the normalised plane stretches
+    /// lengths by at most `max(r'(θ), r(θ)/sin θ)` at angle `θ`, with
+    /// `r(θ) = sin θ / (cos θ + ξ)`; both factors increase with `θ` there, so every
+    /// direction of the cone lands within `tan β · max(r'(θc + β), r(θc + β)/sin(θc + β))`
+    /// of the centre's image (a geodesic of length at most `β ≤ tan β` joins them
+    /// inside the cone), and the affine intrinsics stretch that disc by at most their
+    /// largest singular value. For `ξ > 1`, see [`Renderer::sector_box`].
     fn image_rect(&self, candidate: &Candidate, view: &View) -> Option<[usize; 4]> {
         let c = candidate.center;
         let d = c.length();
         if !(d > candidate.radius * 1.01 + 1e-3) {
             return None;
         }
+        let xi = view.xi;
+        if xi > 1.0 {
+            let [u_lo, u_hi, v_lo, v_hi] = self.sector_box(candidate, view)?;
+            return clip_rect([u_lo, u_hi, v_lo, v_hi], view.max_width as f32 * 0.5, view);
+        }
+        // The cone, widened for rounding: sin β, cos β; the centre's cos θc, sin θc.
+        let sin_b = (candidate.radius / d * 1.001 + 1e-4).min(1.0);
+        let cos_b = (1.0 - sin_b * sin_b).max(0.0).sqrt();
+        let cos_c = (c.z / d).clamp(-1.0, 1.0);
+        let sin_c = (1.0 - cos_c * cos_c).max(0.0).sqrt();
+        // θc + β < π, and cos(θc + β) inside the domain (cos θ + ξ > 0) by a margin.
+        let cos_hi = cos_c * cos_b - sin_c * sin_b;
+        if !(cos_b > -cos_c) || !(cos_hi + xi > 1e-3) || !(cos_b > 0.0) {
+            return None;
+        }
+        let denominator = cos_hi + xi;
+        let radial = (1.0 + xi * cos_hi) / (denominator * denominator);
+        let tangential = 1.0 / denominator;
+        let radius = sin_b / cos_b * radial.max(tangential) * view.affine_norm * 1.001 + 1e-3;
+        // The centre's image.
+        let dd = c.z + xi * d;
+        let (x, y) = (c.x / dd, c.y / dd);
+        let u = view.alpha_u * x + view.skew * y + view.u0;
+        let v = view.alpha_v * y + view.v0;
+        // Splat half-width: size = spacing · scale · M(θ) / ρ, M increasing in θ for
+        // ξ ≤ 1 (see `magnification`).
+        let magnification = view.alpha * radial.max(tangential);
+        let size = candidate.cell.spacing_m * view.splat_scale * magnification
+            / (d - candidate.radius).max(1e-3);
+        let half = (size * 0.5 + 1.0).min(view.max_width as f32 * 0.5);
+        clip_rect([u - radius, u + radius, v - radius, v + radius], half, view)
+    }
+
+    /// The image box `[u_lo, u_hi, v_lo, v_hi]` of the directions of the candidate's
+    /// bounding sphere, for any `ξ`: the UCM maps a direction at angle `θ` off the axis
+    /// and azimuth `φ` to the normalised point `r(θ) (cos φ, sin φ)` with
+    /// `r(θ) = sin θ / (cos θ + ξ)`, increasing over the drawable domain; the cone of
+    /// half-angle `β` gives `θ ∈ [θc − β, θc + β]` and `|φ − φc| ≤ asin(sin β / sin θc)`:
+    /// an annular sector, whose bounding box the affine intrinsics map to the image.
+    /// `None` where the cone reaches the domain's edge.
+    fn sector_box(&self, candidate: &Candidate, view: &View) -> Option<[f32; 4]> {
+        let c = candidate.center;
+        let d = c.length();
         let xi = view.xi;
         let theta_c = (c.z / d).clamp(-1.0, 1.0).acos();
         let beta = (candidate.radius / d).asin() * 1.001 + 1e-4;
@@ -629,32 +748,38 @@ impl Renderer {
             u_lo = u_lo.min(u);
             u_hi = u_hi.max(u);
         }
-        let v_lo = view.alpha_v * y0 + view.v0;
-        let v_hi = view.alpha_v * y1 + view.v0;
-        // Splat half-width: size = spacing · scale · M(θ) / ρ, M increasing in θ for
-        // ξ ≤ 1 (see `magnification`); the largest allowed otherwise.
-        let half = if xi <= 1.0 {
-            let size = candidate.cell.spacing_m * view.splat_scale * self.magnification(theta_hi)
-                / (d - candidate.radius).max(1e-3);
-            (size * 0.5 + 1.0).min(view.max_radius as f32)
-        } else {
-            view.max_radius as f32
-        };
-        let pad = half + 2.0;
-        let (w, h) = (view.width as f32, view.height as f32);
-        let clip = |lo: f32, hi: f32, n: f32| -> (usize, usize) {
-            let lo = (lo - pad).floor().max(0.0);
-            let hi = (hi + pad).ceil().min(n - 1.0);
-            if lo > hi || !lo.is_finite() || !hi.is_finite() {
-                (1, 0)
-            } else {
-                (lo as usize, hi as usize)
-            }
-        };
-        let (u0, u1) = clip(u_lo, u_hi, w);
-        let (v0, v1) = clip(v_lo, v_hi, h);
-        Some([u0, u1, v0, v1])
+        Some([
+            u_lo,
+            u_hi,
+            view.alpha_v * y0 + view.v0,
+            view.alpha_v * y1 + view.v0,
+        ])
     }
+}
+
+/// The pixel rectangle of an image box `[u_lo, u_hi, v_lo, v_hi]` of projections,
+/// widened by splats of half-width `half` (and 2 pixels of margin), clipped to the
+/// image (empty if outside it); `None` if the box is not finite.
+fn clip_rect(image_box: [f32; 4], half: f32, view: &View) -> Option<[usize; 4]> {
+    if !image_box.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let [u_lo, u_hi, v_lo, v_hi] = image_box;
+    let pad = half + 2.0;
+    let clip = |lo: f32, hi: f32, n: i32| -> (usize, usize) {
+        // Limited to just outside the image first, so that floor_small applies.
+        let lo = floor_small(limit(lo - pad, -2.0, n as f32 + 1.0)).max(0);
+        let hi = -floor_small(-limit(hi + pad, -2.0, n as f32 + 1.0));
+        let hi = hi.min(n - 1);
+        if lo > hi {
+            (1, 0)
+        } else {
+            (lo as usize, hi as usize)
+        }
+    };
+    let (u0, u1) = clip(u_lo, u_hi, view.width);
+    let (v0, v1) = clip(v_lo, v_hi, view.height);
+    Some([u0, u1, v0, v1])
 }
 
 /// Pass 1 over a batch of cells, on rayon's threads if `parallel`: chunks of cells of
@@ -687,7 +812,7 @@ fn draw_depth(
     slices.par_iter_mut().for_each(|(cells, splats)| {
         let kept = project_and_depth(points, cells, view, camera, depth, splats, true);
         for s in &mut splats[kept..] {
-            s.half = NOT_DRAWN;
+            s.width = NOT_DRAWN;
         }
     });
     total
@@ -696,11 +821,11 @@ fn draw_depth(
 /// A projected point, written by pass 1 and read by pass 2 (12 bytes).
 #[derive(Clone, Copy, Debug, Default)]
 struct Splat {
-    /// Column and row of the pixel containing the projection.
+    /// Column and row of the splat's first (top-left) pixel.
     iu: i16,
     iv: i16,
-    /// Half-width of the square splat, pixels; [`NOT_DRAWN`] if the point is not seen.
-    half: u16,
+    /// Width of the square splat, pixels; [`NOT_DRAWN`] if the point is not seen.
+    width: u16,
     /// Intensity in 16-bit fixed point.
     intensity: u16,
     /// Range, metres.
@@ -747,12 +872,15 @@ fn limit(x: f32, lo: f32, hi: f32) -> f32 {
     x.max(lo).min(hi)
 }
 
-/// Round to the nearest integer (halves up) for values in the range of pixel
-/// coordinates.
+/// The first pixel (column or row) of a splat `width` pixels wide centred on the
+/// coordinate `x`: the `width` pixels whose centres are nearest to `x`, i.e.
+/// `round(x) − (width − 1)/2` for an odd width and `floor(x) − (width/2 − 1)` for an even
+/// one (halves up; `x` is limited to the range of pixel coordinates first).
 #[inline(always)]
-fn round_px(x: f32) -> i32 {
+fn first_px(x: f32, width: i32) -> i32 {
     // Limit first: the projection of points near the domain's edge can be huge.
-    floor_small(limit(x, -30_000.0, 30_000.0) + 0.5)
+    let odd = if width & 1 == 1 { 0.5 } else { 0.0 };
+    floor_small(limit(x, -30_000.0, 30_000.0) + odd) - ((width - 1) >> 1)
 }
 
 /// The splat of one point, or `None` if it is not seen (behind the viewpoint, outside
@@ -778,29 +906,33 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
     };
     // Footprint in pixels: spacing · α/D · max((ρ + ξZ)/D, 1).
     let size = footprint * inv_d * ((rho + view.xi * pc.z) * inv_d).max(1.0);
-    let half = half_width(size, view.max_radius);
-    let iu = round_px(u);
-    let iv = round_px(v);
-    if iu + half < 0 || iv + half < 0 || iu - half >= view.width || iv - half >= view.height {
+    let width = splat_width(size, view.max_width);
+    let iu = first_px(u, width);
+    let iv = first_px(v, width);
+    if iu + width <= 0 || iv + width <= 0 || iu >= view.width || iv >= view.height {
         return None;
     }
     Some(Splat {
         iu: iu as i16,
         iv: iv as i16,
-        half: half as u16,
+        width: width as u16,
         intensity: (p[3] * INTENSITY_SCALE + 0.5) as u16,
         range: rho,
     })
 }
 
-/// Half-width of the square splat of a footprint of `size` pixels:
-/// `ceil((size − 1)/2)`, at most `max_radius` (no libm call, no branch).
+/// Width of the square splat of a footprint of `size` pixels: `ceil(size)`, at least
+/// 1 and at most `max_width` (no libm call, no branch).
 #[inline(always)]
-fn half_width(size: f32, max_radius: i32) -> i32 {
-    let h = limit((size - 1.0) * 0.5, 0.0, 1000.0);
-    let t = floor_small(h);
-    (t + i32::from((t as f32) < h)).min(max_radius)
+fn splat_width(size: f32, max_width: i32) -> i32 {
+    let w = limit(size, 1.0, 4000.0);
+    let t = floor_small(w);
+    (t + i32::from((t as f32) < w)).min(max_width)
 }
+
+/// Points projected into a buffer of the first level of cache before their depth
+/// pass (a multiple of [`BLOCK`]).
+const STAGE: usize = 256;
 
 /// How many cells ahead of the one being drawn [`warm`] asks for points.
 const WARM_AHEAD: usize = 2;
@@ -817,7 +949,7 @@ struct Lanes<const N: usize> {
     iu: [i32; N],
     iv: [i32; N],
     /// [`NOT_DRAWN`] where the point is not seen.
-    half: [i32; N],
+    width: [i32; N],
     range: [f32; N],
     intensity: [i32; N],
 }
@@ -827,7 +959,7 @@ impl<const N: usize> Lanes<N> {
         Self {
             iu: [0; N],
             iv: [0; N],
-            half: [0; N],
+            width: [0; N],
             range: [0.0; N],
             intensity: [0; N],
         }
@@ -855,7 +987,7 @@ fn project_block<const N: usize>(
         out[k] = Splat {
             iu: lanes.iu[k] as i16,
             iv: lanes.iv[k] as i16,
-            half: lanes.half[k] as u16,
+            width: lanes.width[k] as u16,
             intensity: lanes.intensity[k] as u16,
             range: lanes.range[k],
         };
@@ -887,14 +1019,13 @@ fn project_lanes_portable<const N: usize>(
         let u = view.alpha_u * (pcx * inv_d) + view.skew * (pcy * inv_d) + view.u0;
         let v = view.alpha_v * (pcy * inv_d) + view.v0;
         let size = footprint * inv_d * ((rho + view.xi * pcz) * inv_d).max(1.0);
-        let h = half_width(size, view.max_radius);
-        let (pu, pv) = (round_px(u), round_px(v));
-        let in_image =
-            (pu + h >= 0) & (pv + h >= 0) & (pu - h < view.width) & (pv - h < view.height);
+        let n = splat_width(size, view.max_width);
+        let (pu, pv) = (first_px(u, n), first_px(v, n));
+        let in_image = (pu + n > 0) & (pv + n > 0) & (pu < view.width) & (pv < view.height);
         out.iu[k] = pu;
         out.iv[k] = pv;
-        out.half[k] = if in_domain & in_image {
-            h
+        out.width[k] = if in_domain & in_image {
+            n
         } else {
             i32::from(NOT_DRAWN)
         };
@@ -905,23 +1036,27 @@ fn project_lanes_portable<const N: usize>(
 
 impl Splat {
     /// Call `f` with the index of every pixel the splat covers, clipped to the image
-    /// (a drawn splat: `half != NOT_DRAWN`, so it reaches the image).
+    /// (a drawn splat: `width != NOT_DRAWN`, so it reaches the image).
     #[inline(always)]
     fn for_each_pixel(&self, view: &View, mut f: impl FnMut(usize)) {
         let w = view.width as usize;
-        let (iu, iv, half) = (i32::from(self.iu), i32::from(self.iv), i32::from(self.half));
-        if half == 0 {
+        let (iu, iv, n) = (
+            i32::from(self.iu),
+            i32::from(self.iv),
+            i32::from(self.width),
+        );
+        if n == 1 {
             // Most splats: a single pixel, inside the image.
             f(iv as usize * w + iu as usize);
             return;
         }
         let (u0, u1) = (
-            (iu - half).max(0) as usize,
-            (iu + half).min(view.width - 1) as usize,
+            iu.max(0) as usize,
+            (iu + n - 1).min(view.width - 1) as usize,
         );
         let (v0, v1) = (
-            (iv - half).max(0) as usize,
-            (iv + half).min(view.height - 1) as usize,
+            iv.max(0) as usize,
+            (iv + n - 1).min(view.height - 1) as usize,
         );
         for row in v0..=v1 {
             for k in row * w + u0..=row * w + u1 {
@@ -976,9 +1111,10 @@ fn project_and_depth(
     splats: &mut [Splat],
     atomic: bool,
 ) -> usize {
-    let mut slot = 0;
     let mut kept = 0;
-    let mut block = [Splat::default(); TAIL];
+    // The splats of up to `STAGE` points of a cell, projected here (in the first level
+    // of cache) before the visible ones are kept in `splats`.
+    let mut stage = [Splat::default(); STAGE];
     let mut input = [[0f32; 4]; TAIL];
     let mut warmed = 0u32;
     for (index, cell) in cells.iter().enumerate() {
@@ -987,47 +1123,46 @@ fn project_and_depth(
         }
         let start = cell.start as usize;
         let footprint = cell.spacing_m * view.alpha * view.splat_scale;
-        let cell_points = &points[start..start + cell.count as usize];
-        let out = &mut splats[slot..slot + cell_points.len()];
-        slot += cell_points.len();
-        if view.undistorted {
-            let mut chunks = cell_points.chunks_exact(BLOCK);
-            let mut out_chunks = out.chunks_exact_mut(BLOCK);
-            for (chunk, out) in (&mut chunks).zip(&mut out_chunks) {
-                let chunk: &[_; BLOCK] = chunk.try_into().expect("chunks of BLOCK points");
-                let out: &mut [_; BLOCK] = out.try_into().expect("BLOCK slots");
-                project_block(chunk, footprint, view, out);
+        for cell_points in points[start..start + cell.count as usize].chunks(STAGE) {
+            let out = &mut stage[..cell_points.len()];
+            if view.undistorted {
+                let mut chunks = cell_points.chunks_exact(BLOCK);
+                let mut out_chunks = out.chunks_exact_mut(BLOCK);
+                for (chunk, out) in (&mut chunks).zip(&mut out_chunks) {
+                    let chunk: &[_; BLOCK] = chunk.try_into().expect("chunks of BLOCK points");
+                    let out: &mut [_; BLOCK] = out.try_into().expect("BLOCK slots");
+                    project_block(chunk, footprint, view, out);
+                }
+                // The last points in smaller blocks, the last one padded.
+                let mut chunks = chunks.remainder().chunks_exact(TAIL);
+                let mut out_chunks = out_chunks.into_remainder().chunks_exact_mut(TAIL);
+                for (chunk, out) in (&mut chunks).zip(&mut out_chunks) {
+                    let chunk: &[_; TAIL] = chunk.try_into().expect("chunks of TAIL points");
+                    let out: &mut [_; TAIL] = out.try_into().expect("TAIL slots");
+                    project_block(chunk, footprint, view, out);
+                }
+                let rest = chunks.remainder();
+                if !rest.is_empty() {
+                    let mut block = [Splat::default(); TAIL];
+                    input[..rest.len()].copy_from_slice(rest);
+                    project_block(&input, footprint, view, &mut block);
+                    out_chunks
+                        .into_remainder()
+                        .copy_from_slice(&block[..rest.len()]);
+                }
+            } else {
+                for (p, out) in cell_points.iter().zip(out.iter_mut()) {
+                    *out = project_point(p, footprint, view, camera).unwrap_or(Splat {
+                        width: NOT_DRAWN,
+                        ..Splat::default()
+                    });
+                }
             }
-            // The last points of the cell in smaller blocks, the last one padded.
-            let mut chunks = chunks.remainder().chunks_exact(TAIL);
-            let mut out_chunks = out_chunks.into_remainder().chunks_exact_mut(TAIL);
-            for (chunk, out) in (&mut chunks).zip(&mut out_chunks) {
-                let chunk: &[_; TAIL] = chunk.try_into().expect("chunks of TAIL points");
-                let out: &mut [_; TAIL] = out.try_into().expect("TAIL slots");
-                project_block(chunk, footprint, view, out);
-            }
-            let rest = chunks.remainder();
-            if !rest.is_empty() {
-                input[..rest.len()].copy_from_slice(rest);
-                project_block(&input, footprint, view, &mut block);
-                out_chunks
-                    .into_remainder()
-                    .copy_from_slice(&block[..rest.len()]);
-            }
-        } else {
-            for (p, out) in cell_points.iter().zip(out.iter_mut()) {
-                *out = project_point(p, footprint, view, camera).unwrap_or(Splat {
-                    half: NOT_DRAWN,
-                    ..Splat::default()
-                });
-            }
-        }
-        // Compact in place: `kept` never passes the slot being read.
-        for k in slot - cell_points.len()..slot {
-            let s = splats[k];
-            if s.half != NOT_DRAWN {
-                let visible = splat_depth(&s, view, depth, atomic);
-                splats[kept] = s;
+            // Keep the splats that may add a sample (`kept` never passes the number of
+            // points read, so its slot exists).
+            for s in out.iter().filter(|s| s.width != NOT_DRAWN) {
+                let visible = splat_depth(s, view, depth, atomic);
+                splats[kept] = *s;
                 kept += usize::from(visible);
             }
         }
@@ -1066,7 +1201,7 @@ fn accumulate(
     accum: &[[AtomicU64; 2]],
     atomic: bool,
 ) {
-    for s in splats.iter().filter(|s| s.half != NOT_DRAWN) {
+    for s in splats.iter().filter(|s| s.width != NOT_DRAWN) {
         let sample = (u64::from(s.intensity) << COUNT_BITS) | 1;
         // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
         let range_sample = (s.range * RANGE_SCALE + 0.5) as i64 as u64;
@@ -1165,7 +1300,8 @@ mod tests {
                 width: 320,
                 height: 240,
                 splat_scale,
-                max_radius,
+                max_width: 2 * max_radius + 1,
+                affine_norm: affine_norm(f64::from(alpha_u), f64::from(alpha_u * aspect), f64::from(skew)),
                 depth_band: 0.02,
             };
             // Points at every scale: near the viewpoint, metres and kilometres away.
@@ -1185,7 +1321,7 @@ mod tests {
             let mut tail = [Splat::default(); TAIL];
             let first: &[[f32; 4]; TAIL] = points[..TAIL].try_into().unwrap();
             project_block(first, footprint, &view, &mut tail);
-            let fields = |s: &Splat| (s.iu, s.iv, s.half, s.intensity, s.range.to_bits());
+            let fields = |s: &Splat| (s.iu, s.iv, s.width, s.intensity, s.range.to_bits());
             for (t, b) in tail.iter().zip(&block) {
                 prop_assert_eq!(fields(t), fields(b));
             }
@@ -1194,19 +1330,19 @@ mod tests {
                     Some(want) => {
                         prop_assert_eq!(fields(got), fields(&want), "point {:?}", p);
                     }
-                    None => prop_assert_eq!(got.half, NOT_DRAWN, "point {:?}", p),
+                    None => prop_assert_eq!(got.width, NOT_DRAWN, "point {:?}", p),
                 }
             }
             // The portable kernel (the one of other architectures) too.
             let mut lanes = Lanes::<BLOCK>::new();
             project_lanes_portable(&points, footprint, &view, &mut lanes);
             for (k, got) in block.iter().enumerate() {
-                prop_assert_eq!(lanes.half[k] as u16, got.half);
-                if got.half != NOT_DRAWN {
+                prop_assert_eq!(lanes.width[k] as u16, got.width);
+                if got.width != NOT_DRAWN {
                     let portable = (
                         lanes.iu[k] as i16,
                         lanes.iv[k] as i16,
-                        lanes.half[k] as u16,
+                        lanes.width[k] as u16,
                         lanes.intensity[k] as u16,
                         lanes.range[k].to_bits(),
                     );

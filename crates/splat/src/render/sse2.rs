@@ -30,10 +30,7 @@ fn floor_small(x: m128) -> m128i {
     // One step down where the rounding went up (a true comparison is −1).
     add_i32_m128i(
         nearest,
-        cast_to_m128i_from_m128(cmp_gt_mask_m128(
-            convert_to_m128_from_i32_m128i(nearest),
-            x,
-        )),
+        cast_to_m128i_from_m128(cmp_gt_mask_m128(convert_to_m128_from_i32_m128i(nearest), x)),
     )
 }
 
@@ -44,10 +41,16 @@ fn limit(x: m128, lo: f32, hi: f32) -> m128 {
     min_m128(max_m128(x, splat(lo)), splat(hi))
 }
 
-/// [`super::round_px`].
+/// [`super::first_px`].
 #[inline(always)]
-fn round_px(x: m128) -> m128i {
-    floor_small(add_m128(limit(x, -30_000.0, 30_000.0), splat(0.5)))
+fn first_px(x: m128, width: m128i, odd_offset: m128) -> m128i {
+    let one = set_splat_i32_m128i(1);
+    let odd = cmp_eq_mask_i32_m128i(bitand_m128i(width, one), one);
+    let offset = bitand_m128(cast_to_m128_from_m128i(odd), odd_offset);
+    sub_i32_m128i(
+        floor_small(add_m128(limit(x, -30_000.0, 30_000.0), offset)),
+        shr_imm_i32_m128i::<1>(sub_i32_m128i(width, one)),
+    )
 }
 
 /// `a` where `mask` is set, `b` elsewhere.
@@ -56,25 +59,16 @@ fn select(mask: m128i, a: m128i, b: m128i) -> m128i {
     bitor_m128i(bitand_m128i(mask, a), bitandnot_m128i(mask, b))
 }
 
-/// [`super::half_width`].
+/// [`super::splat_width`].
 #[inline(always)]
-fn half_width(size: m128, max_radius: m128i) -> m128i {
-    let h = limit(mul_m128(sub_m128(size, splat(1.0)), splat(0.5)), 0.0, 1000.0);
-    let t = floor_small(h);
+fn splat_width(size: m128, max_width: m128i) -> m128i {
+    let w = limit(size, 1.0, 4000.0);
+    let t = floor_small(w);
     let up = sub_i32_m128i(
         t,
-        cast_to_m128i_from_m128(cmp_lt_mask_m128(convert_to_m128_from_i32_m128i(t), h)),
+        cast_to_m128i_from_m128(cmp_lt_mask_m128(convert_to_m128_from_i32_m128i(t), w)),
     );
-    select(cmp_gt_mask_i32_m128i(up, max_radius), max_radius, up)
-}
-
-/// `a >= 0`, lane by lane.
-#[inline(always)]
-fn non_negative(a: m128i) -> m128i {
-    bitandnot_m128i(
-        cmp_gt_mask_i32_m128i(zeroed_m128i(), a),
-        set_splat_i32_m128i(-1),
-    )
+    select(cmp_gt_mask_i32_m128i(up, max_width), max_width, up)
 }
 
 /// The lanes of [`super::project_block`], four points at a time (`N` is a multiple of
@@ -102,7 +96,8 @@ pub(super) fn project_lanes<const N: usize>(
     let (alpha_u, alpha_v, skew) = (splat(view.alpha_u), splat(view.alpha_v), splat(view.skew));
     let (u0, v0) = (splat(view.u0), splat(view.v0));
     let footprint = splat(footprint);
-    let max_radius = set_splat_i32_m128i(view.max_radius);
+    let max_width = set_splat_i32_m128i(view.max_width);
+    let (zero_i, half) = (zeroed_m128i(), splat(0.5));
     let (width, height) = (
         set_splat_i32_m128i(view.width),
         set_splat_i32_m128i(view.height),
@@ -140,16 +135,16 @@ pub(super) fn project_lanes<const N: usize>(
             mul(footprint, inv_d),
             max_m128(mul(add(rho, mul(xi, pcz)), inv_d), one),
         );
-        let h = half_width(size, max_radius);
-        let (pu, pv) = (round_px(u), round_px(v));
+        let n = splat_width(size, max_width);
+        let (pu, pv) = (first_px(u, n, half), first_px(v, n, half));
         let in_image = bitand_m128i(
             bitand_m128i(
-                non_negative(add_i32_m128i(pu, h)),
-                non_negative(add_i32_m128i(pv, h)),
+                cmp_gt_mask_i32_m128i(add_i32_m128i(pu, n), zero_i),
+                cmp_gt_mask_i32_m128i(add_i32_m128i(pv, n), zero_i),
             ),
             bitand_m128i(
-                cmp_gt_mask_i32_m128i(width, sub_i32_m128i(pu, h)),
-                cmp_gt_mask_i32_m128i(height, sub_i32_m128i(pv, h)),
+                cmp_gt_mask_i32_m128i(width, pu),
+                cmp_gt_mask_i32_m128i(height, pv),
             ),
         );
         let seen = bitand_m128i(cast_to_m128i_from_m128(in_domain), in_image);
@@ -161,7 +156,7 @@ pub(super) fn project_lanes<const N: usize>(
         let lanes = base..base + 4;
         out.iu[lanes.clone()].copy_from_slice(&lanes_i32(pu));
         out.iv[lanes.clone()].copy_from_slice(&lanes_i32(pv));
-        out.half[lanes.clone()].copy_from_slice(&lanes_i32(select(seen, h, not_drawn)));
+        out.width[lanes.clone()].copy_from_slice(&lanes_i32(select(seen, n, not_drawn)));
         out.range[lanes.clone()].copy_from_slice(&rho.to_array());
         out.intensity[lanes].copy_from_slice(&lanes_i32(intensity));
     }
