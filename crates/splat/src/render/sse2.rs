@@ -80,7 +80,7 @@ pub(super) fn project_lanes<const N: usize>(
     view: &View,
     out: &mut Lanes<N>,
 ) {
-    const { assert!(N % 4 == 0) };
+    const { assert!(N.is_multiple_of(4)) };
     let (add, mul) = (add_m128, mul_m128);
     let r = view.rotation;
     let t = view.translation;
