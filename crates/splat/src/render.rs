@@ -812,24 +812,67 @@ fn draw_depth(
     slices.par_iter_mut().for_each(|(cells, splats)| {
         let kept = project_and_depth(points, cells, view, camera, depth, splats, true);
         for s in &mut splats[kept..] {
-            s.width = NOT_DRAWN;
+            *s = Splat::not_drawn();
         }
     });
     total
 }
 
-/// A projected point, written by pass 1 and read by pass 2 (12 bytes).
-#[derive(Clone, Copy, Debug, Default)]
-struct Splat {
-    /// Column and row of the splat's first (top-left) pixel.
-    iu: i16,
-    iv: i16,
-    /// Width of the square splat, pixels; [`NOT_DRAWN`] if the point is not seen.
-    width: u16,
-    /// Intensity in 16-bit fixed point.
-    intensity: u16,
-    /// Range, metres.
-    range: f32,
+/// A projected point, written by pass 1 and read by pass 2: four 32-bit words
+/// `[first column | first row << 16, width | intensity << 16, range's bits, 0]` (16
+/// bytes, so that the vector kernel writes it whole and a copy is one move). The first
+/// column and row are those of the splat's top-left pixel; the width is
+/// [`NOT_DRAWN`] if the point is not seen (then the other fields are meaningless); the
+/// intensity is in 16-bit fixed point; the range in metres.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(align(16))]
+struct Splat([u32; 4]);
+
+impl Splat {
+    #[inline(always)]
+    fn new(iu: i32, iv: i32, width: i32, intensity: i32, range_m: f32) -> Self {
+        Self([
+            (iu as u32 & 0xFFFF) | ((iv as u32) << 16),
+            (width as u32 & 0xFFFF) | ((intensity as u32) << 16),
+            range_m.to_bits(),
+            0,
+        ])
+    }
+
+    /// A point that is not seen.
+    fn not_drawn() -> Self {
+        Self::new(0, 0, i32::from(NOT_DRAWN), 0, 0.0)
+    }
+
+    #[inline(always)]
+    fn iu(&self) -> i32 {
+        i32::from(self.0[0] as u16 as i16)
+    }
+
+    #[inline(always)]
+    fn iv(&self) -> i32 {
+        i32::from((self.0[0] >> 16) as u16 as i16)
+    }
+
+    #[inline(always)]
+    fn width(&self) -> u16 {
+        self.0[1] as u16
+    }
+
+    #[inline(always)]
+    fn drawn(&self) -> bool {
+        self.width() != NOT_DRAWN
+    }
+
+    #[inline(always)]
+    fn intensity(&self) -> u16 {
+        (self.0[1] >> 16) as u16
+    }
+
+    #[inline(always)]
+    fn range_m(&self) -> f32 {
+        f32::from_bits(self.0[2])
+    }
 }
 
 const NOT_DRAWN: u16 = u16::MAX;
@@ -912,13 +955,13 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
     if iu + width <= 0 || iv + width <= 0 || iu >= view.width || iv >= view.height {
         return None;
     }
-    Some(Splat {
-        iu: iu as i16,
-        iv: iv as i16,
-        width: width as u16,
-        intensity: (p[3] * INTENSITY_SCALE + 0.5) as u16,
-        range: rho,
-    })
+    Some(Splat::new(
+        iu,
+        iv,
+        width,
+        i32::from((p[3] * INTENSITY_SCALE + 0.5) as u16),
+        rho,
+    ))
 }
 
 /// Width of the square splat of a footprint of `size` pixels: `ceil(size)`, at least
@@ -943,6 +986,7 @@ const BLOCK: usize = 64;
 /// detail leaves most cells with a count that is not a multiple of [`BLOCK`]).
 const TAIL: usize = 8;
 
+#[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
 /// The splats of `N` points, one array per field: what [`project_block`] computes
 /// several points at a time before packing them into [`Splat`]s.
 struct Lanes<const N: usize> {
@@ -954,7 +998,19 @@ struct Lanes<const N: usize> {
     intensity: [i32; N],
 }
 
+#[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
 impl<const N: usize> Lanes<N> {
+    /// The splat of point `k`.
+    fn splat(&self, k: usize) -> Splat {
+        Splat::new(
+            self.iu[k],
+            self.iv[k],
+            self.width[k],
+            self.intensity[k],
+            self.range[k],
+        )
+    }
+
     fn new() -> Self {
         Self {
             iu: [0; N],
@@ -970,7 +1026,7 @@ impl<const N: usize> Lanes<N> {
 /// same operations in the same order (so bit for bit the same splats), several points
 /// per instruction: explicit SSE2 on x86-64 ([`sse2::project_lanes`]), elsewhere
 /// branch-free code that the compiler vectorises ([`project_lanes_portable`]). Unseen
-/// points get `half = NOT_DRAWN` (their other fields are then meaningless).
+/// points get the width [`NOT_DRAWN`] (their other fields are then meaningless).
 #[inline(always)]
 fn project_block<const N: usize>(
     points: &[[f32; 4]; N],
@@ -978,19 +1034,15 @@ fn project_block<const N: usize>(
     view: &View,
     out: &mut [Splat; N],
 ) {
-    let mut lanes = Lanes::<N>::new();
     #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-    sse2::project_lanes(points, footprint, view, &mut lanes);
+    sse2::project_splats(points, footprint, view, out);
     #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-    project_lanes_portable(points, footprint, view, &mut lanes);
-    for k in 0..N {
-        out[k] = Splat {
-            iu: lanes.iu[k] as i16,
-            iv: lanes.iv[k] as i16,
-            width: lanes.width[k] as u16,
-            intensity: lanes.intensity[k] as u16,
-            range: lanes.range[k],
-        };
+    {
+        let mut lanes = Lanes::<N>::new();
+        project_lanes_portable(points, footprint, view, &mut lanes);
+        for (k, out) in out.iter_mut().enumerate() {
+            *out = lanes.splat(k);
+        }
     }
 }
 
@@ -1040,26 +1092,16 @@ impl Splat {
     #[inline(always)]
     fn for_each_pixel(&self, view: &View, mut f: impl FnMut(usize)) {
         let w = view.width as usize;
-        let (iu, iv, n) = (
-            i32::from(self.iu),
-            i32::from(self.iv),
-            i32::from(self.width),
-        );
+        let (iu, iv, n) = (self.iu(), self.iv(), i32::from(self.width()));
         if n == 1 {
             // Most splats: a single pixel, inside the image.
             f(iv as usize * w + iu as usize);
             return;
         }
-        let (u0, u1) = (
-            iu.max(0) as usize,
-            (iu + n - 1).min(view.width - 1) as usize,
-        );
-        let (v0, v1) = (
-            iv.max(0) as usize,
-            (iv + n - 1).min(view.height - 1) as usize,
-        );
-        for row in v0..=v1 {
-            for k in row * w + u0..=row * w + u1 {
+        let (u0, u1) = (iu.max(0) as usize, (iu + n).min(view.width) as usize);
+        let (v0, v1) = (iv.max(0) as usize, (iv + n).min(view.height) as usize);
+        for row in v0..v1 {
+            for k in row * w + u0..row * w + u1 {
                 f(k);
             }
         }
@@ -1072,8 +1114,8 @@ impl Splat {
 /// it everywhere; the test is pass 2's own, on a depth at least the final one).
 #[inline(always)]
 fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) -> bool {
-    let key = s.range.to_bits();
-    let limit = band_limit(s.range, view);
+    let key = s.0[2];
+    let limit = band_limit(s.range_m(), view);
     let mut hidden = true;
     s.for_each_pixel(view, |k| {
         let cell = &depth[k];
@@ -1152,15 +1194,13 @@ fn project_and_depth(
                 }
             } else {
                 for (p, out) in cell_points.iter().zip(out.iter_mut()) {
-                    *out = project_point(p, footprint, view, camera).unwrap_or(Splat {
-                        width: NOT_DRAWN,
-                        ..Splat::default()
-                    });
+                    *out =
+                        project_point(p, footprint, view, camera).unwrap_or_else(Splat::not_drawn);
                 }
             }
             // Keep the splats that may add a sample (`kept` never passes the number of
             // points read, so its slot exists).
-            for s in out.iter().filter(|s| s.width != NOT_DRAWN) {
+            for s in out.iter().filter(|s| s.drawn()) {
                 let visible = splat_depth(s, view, depth, atomic);
                 splats[kept] = *s;
                 kept += usize::from(visible);
@@ -1201,11 +1241,11 @@ fn accumulate(
     accum: &[[AtomicU64; 2]],
     atomic: bool,
 ) {
-    for s in splats.iter().filter(|s| s.width != NOT_DRAWN) {
-        let sample = (u64::from(s.intensity) << COUNT_BITS) | 1;
+    for s in splats.iter().filter(|s| s.drawn()) {
+        let sample = (u64::from(s.intensity()) << COUNT_BITS) | 1;
         // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
-        let range_sample = (s.range * RANGE_SCALE + 0.5) as i64 as u64;
-        let limit = band_limit(s.range, view);
+        let range_sample = (s.range_m() * RANGE_SCALE + 0.5) as i64 as u64;
+        let limit = band_limit(s.range_m(), view);
         s.for_each_pixel(view, |k| {
             let near = f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit;
             let [slot, range] = &accum[k];
@@ -1321,32 +1361,23 @@ mod tests {
             let mut tail = [Splat::default(); TAIL];
             let first: &[[f32; 4]; TAIL] = points[..TAIL].try_into().unwrap();
             project_block(first, footprint, &view, &mut tail);
-            let fields = |s: &Splat| (s.iu, s.iv, s.width, s.intensity, s.range.to_bits());
             for (t, b) in tail.iter().zip(&block) {
-                prop_assert_eq!(fields(t), fields(b));
+                prop_assert_eq!(t, b);
             }
             for (p, got) in points.iter().zip(&block) {
                 match project_point(p, footprint, &view, &camera) {
-                    Some(want) => {
-                        prop_assert_eq!(fields(got), fields(&want), "point {:?}", p);
-                    }
-                    None => prop_assert_eq!(got.width, NOT_DRAWN, "point {:?}", p),
+                    Some(want) => prop_assert_eq!(*got, want, "point {:?}", p),
+                    None => prop_assert!(!got.drawn(), "point {:?}", p),
                 }
             }
             // The portable kernel (the one of other architectures) too.
             let mut lanes = Lanes::<BLOCK>::new();
             project_lanes_portable(&points, footprint, &view, &mut lanes);
             for (k, got) in block.iter().enumerate() {
-                prop_assert_eq!(lanes.width[k] as u16, got.width);
-                if got.width != NOT_DRAWN {
-                    let portable = (
-                        lanes.iu[k] as i16,
-                        lanes.iv[k] as i16,
-                        lanes.width[k] as u16,
-                        lanes.intensity[k] as u16,
-                        lanes.range[k].to_bits(),
-                    );
-                    prop_assert_eq!(portable, fields(got));
+                let portable = lanes.splat(k);
+                prop_assert_eq!(portable.drawn(), got.drawn());
+                if got.drawn() {
+                    prop_assert_eq!(portable, *got);
                 }
             }
         }

@@ -7,16 +7,18 @@
 
 use safe_arch::*;
 
-use super::{INTENSITY_SCALE, Lanes, NOT_DRAWN, View};
+use super::{INTENSITY_SCALE, NOT_DRAWN, Splat, View};
 
 #[inline(always)]
 fn splat(x: f32) -> m128 {
     set_splat_m128(x)
 }
 
+/// The four 32-bit lanes as a splat's words.
 #[inline(always)]
-fn lanes_i32(v: m128i) -> [i32; 4] {
-    v.into()
+fn splat_words(v: m128i) -> Splat {
+    let lanes: [i32; 4] = v.into();
+    Splat(lanes.map(|x| x as u32))
 }
 
 /// [`super::floor_small`] of four values.
@@ -71,14 +73,14 @@ fn splat_width(size: m128, max_width: m128i) -> m128i {
     select(cmp_gt_mask_i32_m128i(up, max_width), max_width, up)
 }
 
-/// The lanes of [`super::project_block`], four points at a time (`N` is a multiple of
-/// four).
+/// The splats of [`super::project_block`], four points at a time (`N` is a multiple
+/// of four).
 #[inline(always)]
-pub(super) fn project_lanes<const N: usize>(
+pub(super) fn project_splats<const N: usize>(
     points: &[[f32; 4]; N],
     footprint: f32,
     view: &View,
-    out: &mut Lanes<N>,
+    out: &mut [Splat; N],
 ) {
     const { assert!(N.is_multiple_of(4)) };
     let (add, mul) = (add_m128, mul_m128);
@@ -103,6 +105,7 @@ pub(super) fn project_lanes<const N: usize>(
         set_splat_i32_m128i(view.height),
     );
     let not_drawn = set_splat_i32_m128i(i32::from(NOT_DRAWN));
+    let low_half = set_splat_i32_m128i(0xFFFF);
     for base in (0..N).step_by(4) {
         // Four points [x, y, z, grey] transposed into x, y, z and grey of four points.
         let a = m128::from_array(points[base]);
@@ -153,11 +156,28 @@ pub(super) fn project_lanes<const N: usize>(
             0.0,
             65535.0,
         ));
-        let lanes = base..base + 4;
-        out.iu[lanes.clone()].copy_from_slice(&lanes_i32(pu));
-        out.iv[lanes.clone()].copy_from_slice(&lanes_i32(pv));
-        out.width[lanes.clone()].copy_from_slice(&lanes_i32(select(seen, n, not_drawn)));
-        out.range[lanes.clone()].copy_from_slice(&rho.to_array());
-        out.intensity[lanes].copy_from_slice(&lanes_i32(intensity));
+        // The splats' words, [iu | iv << 16, width | intensity << 16, range, 0] per
+        // point, transposed from one vector per word to one per point.
+        let words = [
+            bitor_m128i(bitand_m128i(pu, low_half), shl_imm_u32_m128i::<16>(pv)),
+            bitor_m128i(
+                bitand_m128i(select(seen, n, not_drawn), low_half),
+                shl_imm_u32_m128i::<16>(intensity),
+            ),
+            cast_to_m128i_from_m128(rho),
+            zero_i,
+        ];
+        let (w01_lo, w23_lo) = (
+            unpack_low_i32_m128i(words[0], words[1]),
+            unpack_low_i32_m128i(words[2], words[3]),
+        );
+        let (w01_hi, w23_hi) = (
+            unpack_high_i32_m128i(words[0], words[1]),
+            unpack_high_i32_m128i(words[2], words[3]),
+        );
+        out[base] = splat_words(unpack_low_i64_m128i(w01_lo, w23_lo));
+        out[base + 1] = splat_words(unpack_high_i64_m128i(w01_lo, w23_lo));
+        out[base + 2] = splat_words(unpack_low_i64_m128i(w01_hi, w23_hi));
+        out[base + 3] = splat_words(unpack_high_i64_m128i(w01_hi, w23_hi));
     }
 }
