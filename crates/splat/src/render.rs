@@ -6,7 +6,9 @@
 //!    splat whose size follows the model's local magnification
 //!    (`spacing · α/D · max((ρ + ξZ)/D, 1)` pixels, the larger of the radial and
 //!    tangential magnifications of the UCM at the point), so that surfaces close to the
-//!    camera stay hole-free. Every covered pixel keeps the minimum of the range's bits
+//!    camera stay hole-free: a footprint of `s` pixels covers a square of the odd width
+//!    `2 ⌈(s − 1)/2⌉ + 1` centred on the pixel of the projection. Every covered
+//!    pixel keeps the minimum of the range's bits
 //!    (positive `f32`s order as their bits): exact, and independent of the order in
 //!    which points are drawn, so the result does not depend on the thread count
 //!    (Schütz, Kerbl, Wimmer 2021). Only the nearest range is needed afterwards (pass 2
@@ -27,7 +29,12 @@
 //! by more than the depth band is skipped (**occlusion culling**). The test is
 //! conservative: such a cell could neither lower a depth nor add a sample, so the image
 //! is exactly the one drawn without it (tested), and the batches are tested one after
-//! the other so that what is skipped does not depend on the thread count either. Where a cell's points would be denser than `lod_spacing_px` on the image,
+//! the other so that what is skipped does not depend on the thread count either. The
+//! rectangle of a cell, for `ξ ≤ 1`, is a disc around its centre's image whose radius
+//! bounds the UCM's stretch over the cell's cone of directions (no transcendental
+//! function per cell); 8 × 8 tiles of the farthest depth, refreshed on demand once per
+//! batch, decide most occluded cells before any pixel is read. Where a cell's points
+//! would be denser than `lod_spacing_px` on the image,
 //! only a prefix of the cell (a uniform random subsample, see [`crate::PointCloud`]) is
 //! drawn, with proportionally larger splats. The subsample size varies with the pose
 //! one point at a time, so the rendering stays (almost) continuous in the pose.
@@ -36,16 +43,20 @@
 //! origin, ranges of at most a few hundred metres).
 //!
 //! Speed: pass 1 projects the points of a camera without lens distortion 64 at a time
-//! (a cell's last points 8 at a time) with branch-free arithmetic that the compiler
-//! turns into vector instructions, then scatters their splats; single-pixel splats
-//! (most of them) skip the square loops, and the single-threaded passes take minima and
-//! add samples without a branch (whether a point is nearer is unpredictable). Each
-//! point's splat is bit for bit the one of the scalar reference (tested). A splat whose
-//! every pixel already holds a range below its depth band when pass 1 reaches it is
-//! dropped there (pass 2 would reject it everywhere, since depths only decrease), so
-//! pass 2 reads only the splats that may add a sample: about 40 % of those drawn at a
-//! street pose. The occlusion test of a cell stops at the first row of its rectangle
-//! that shows it may be visible.
+//! (a cell's last points 8 at a time, 256 at most into a buffer that stays in the first
+//! level of cache): in explicit SSE2 on x86-64 (through `safe_arch`, four points per
+//! instruction, each splat written whole as four 32-bit words), elsewhere with
+//! branch-free arithmetic that the compiler vectorises; then it scatters their splats.
+//! The points of the cell two ahead in the draw list are prefetched (cells are drawn
+//! front to back, not in memory order). Single-pixel splats (most of them) skip the
+//! square loops, and the single-threaded passes take minima and add samples without a
+//! branch (whether a point is nearer is unpredictable). Each point's splat is bit for
+//! bit the one of the scalar reference (tested, both kernels). A splat whose every
+//! pixel already holds a range below its depth band when pass 1 reaches it is dropped
+//! there (pass 2 would reject it everywhere, since depths only decrease), so pass 2
+//! reads only the splats that may add a sample: about 40 % of those drawn at a street
+//! pose. The occlusion test of a cell stops at the first tile, then the first row of
+//! its rectangle, that shows it may be visible.
 
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
@@ -78,8 +89,8 @@ pub struct RenderOptions {
     /// Splat size factor over the nominal footprint (≥ 1 fills the gaps that the
     /// random jitter of a real sampling leaves). Default 1.25.
     pub splat_scale: f32,
-    /// Largest splat half-width, pixels (bounds the cost of points very close to the
-    /// camera). Default 8.
+    /// Largest splat half-width, pixels: splats are at most `2 r + 1` pixels wide
+    /// (bounds the cost of points very close to the camera). Default 8.
     pub max_splat_radius_px: u32,
     /// Draw with rayon when the pool has more than one thread. The output is the same
     /// either way. Default true.
@@ -212,6 +223,8 @@ struct View {
     /// `[[α_u, skew], [0, α_v]]` (how much it can stretch a length).
     affine_norm: f32,
     depth_band: f32,
+    /// `1 + depth_band`.
+    band_factor: f32,
 }
 
 /// A renderer for one camera, owning its buffers (no allocation per frame once warm).
@@ -366,6 +379,7 @@ impl Renderer {
             max_width: 2 * self.options.max_splat_radius_px.min(16_000) as i32 + 1,
             affine_norm: affine_norm(i.alpha_u, i.alpha_v, i.skew),
             depth_band: self.options.depth_band,
+            band_factor: 1.0 + self.options.depth_band,
         };
 
         self.select_cells(cloud, &view);
@@ -819,29 +833,30 @@ fn draw_depth(
 }
 
 /// A projected point, written by pass 1 and read by pass 2: four 32-bit words
-/// `[first column | first row << 16, width | intensity << 16, range's bits, 0]` (16
+/// `[first column | first row << 16, width | intensity << 16, range, band limit]` (16
 /// bytes, so that the vector kernel writes it whole and a copy is one move). The first
 /// column and row are those of the splat's top-left pixel; the width is
 /// [`NOT_DRAWN`] if the point is not seen (then the other fields are meaningless); the
-/// intensity is in 16-bit fixed point; the range in metres.
+/// intensity is in 16-bit fixed point; the range and its [`band_limit`] in metres, as
+/// `f32` bits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[repr(align(16))]
 struct Splat([u32; 4]);
 
 impl Splat {
     #[inline(always)]
-    fn new(iu: i32, iv: i32, width: i32, intensity: i32, range_m: f32) -> Self {
+    fn new(iu: i32, iv: i32, width: i32, intensity: i32, range_m: f32, limit_m: f32) -> Self {
         Self([
             (iu as u32 & 0xFFFF) | ((iv as u32) << 16),
             (width as u32 & 0xFFFF) | ((intensity as u32) << 16),
             range_m.to_bits(),
-            0,
+            limit_m.to_bits(),
         ])
     }
 
     /// A point that is not seen.
     fn not_drawn() -> Self {
-        Self::new(0, 0, i32::from(NOT_DRAWN), 0, 0.0)
+        Self::new(0, 0, i32::from(NOT_DRAWN), 0, 0.0, 0.0)
     }
 
     #[inline(always)]
@@ -872,6 +887,12 @@ impl Splat {
     #[inline(always)]
     fn range_m(&self) -> f32 {
         f32::from_bits(self.0[2])
+    }
+
+    /// [`band_limit`] of the range.
+    #[inline(always)]
+    fn limit_m(&self) -> f32 {
+        f32::from_bits(self.0[3])
     }
 }
 
@@ -915,15 +936,13 @@ fn limit(x: f32, lo: f32, hi: f32) -> f32 {
     x.max(lo).min(hi)
 }
 
-/// The first pixel (column or row) of a splat `width` pixels wide centred on the
-/// coordinate `x`: the `width` pixels whose centres are nearest to `x`, i.e.
-/// `round(x) − (width − 1)/2` for an odd width and `floor(x) − (width/2 − 1)` for an even
-/// one (halves up; `x` is limited to the range of pixel coordinates first).
+/// The first pixel (column or row) of a splat of odd `width` centred on the pixel
+/// that holds the coordinate `x`: `round(x) − (width − 1)/2` (halves up; `x` is limited
+/// to the range of pixel coordinates first).
 #[inline(always)]
 fn first_px(x: f32, width: i32) -> i32 {
     // Limit first: the projection of points near the domain's edge can be huge.
-    let odd = if width & 1 == 1 { 0.5 } else { 0.0 };
-    floor_small(limit(x, -30_000.0, 30_000.0) + odd) - ((width - 1) >> 1)
+    floor_small(limit(x, -30_000.0, 30_000.0) + 0.5) - ((width - 1) >> 1)
 }
 
 /// The splat of one point, or `None` if it is not seen (behind the viewpoint, outside
@@ -961,16 +980,22 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
         width,
         i32::from((p[3] * INTENSITY_SCALE + 0.5) as u16),
         rho,
+        band_limit(rho, view),
     ))
 }
 
-/// Width of the square splat of a footprint of `size` pixels: `ceil(size)`, at least
-/// 1 and at most `max_width` (no libm call, no branch).
+/// Width of the square splat of a footprint of `size` pixels: the odd width
+/// `2 ⌈(size − 1)/2⌉ + 1`, at most `max_width` (no libm call, no branch). Odd, so that
+/// a splat grows by a ring of pixels around the one holding the projection. (Session
+/// 14 tried `⌈size⌉`, even widths included: closer to a pixel-integrated reference, but
+/// a rendering less smooth in the pose — the whole-pipeline finite differences of the
+/// PGM's Jacobian along the optical axis fell from 0.87 to 0.84 in cosine — and every
+/// run of the convergence protocols it changed ended worse; `docs/RESULTS.md`.)
 #[inline(always)]
 fn splat_width(size: f32, max_width: i32) -> i32 {
-    let w = limit(size, 1.0, 4000.0);
-    let t = floor_small(w);
-    (t + i32::from((t as f32) < w)).min(max_width)
+    let h = limit((size - 1.0) * 0.5, 0.0, 1000.0);
+    let t = floor_small(h);
+    2 * (t + i32::from((t as f32) < h)).min((max_width - 1) >> 1) + 1
 }
 
 /// Points projected into a buffer of the first level of cache before their depth
@@ -995,6 +1020,7 @@ struct Lanes<const N: usize> {
     /// [`NOT_DRAWN`] where the point is not seen.
     width: [i32; N],
     range: [f32; N],
+    limit: [f32; N],
     intensity: [i32; N],
 }
 
@@ -1008,6 +1034,7 @@ impl<const N: usize> Lanes<N> {
             self.width[k],
             self.intensity[k],
             self.range[k],
+            self.limit[k],
         )
     }
 
@@ -1017,6 +1044,7 @@ impl<const N: usize> Lanes<N> {
             iv: [0; N],
             width: [0; N],
             range: [0.0; N],
+            limit: [0.0; N],
             intensity: [0; N],
         }
     }
@@ -1082,6 +1110,7 @@ fn project_lanes_portable<const N: usize>(
             i32::from(NOT_DRAWN)
         };
         out.range[k] = rho;
+        out.limit[k] = band_limit(rho, view);
         out.intensity[k] = floor_small(limit(grey * INTENSITY_SCALE + 0.5, 0.0, 65535.0));
     }
 }
@@ -1096,6 +1125,17 @@ impl Splat {
         if n == 1 {
             // Most splats: a single pixel, inside the image.
             f(iv as usize * w + iu as usize);
+            return;
+        }
+        if n == 3 && iu >= 0 && iv >= 0 && iu + 3 <= view.width && iv + 3 <= view.height {
+            // 3 × 3 splats inside the image, without loops (whose exits a processor
+            // cannot predict); the results do not depend on the order of the pixels.
+            let first = iv as usize * w + iu as usize;
+            for row in [first, first + w, first + 2 * w] {
+                f(row);
+                f(row + 1);
+                f(row + 2);
+            }
             return;
         }
         let (u0, u1) = (iu.max(0) as usize, (iu + n).min(view.width) as usize);
@@ -1115,7 +1155,7 @@ impl Splat {
 #[inline(always)]
 fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) -> bool {
     let key = s.0[2];
-    let limit = band_limit(s.range_m(), view);
+    let limit = s.limit_m();
     let mut hidden = true;
     s.for_each_pixel(view, |k| {
         let cell = &depth[k];
@@ -1137,7 +1177,7 @@ fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) -> boo
 /// least this (the sample is within the depth band of the nearest).
 #[inline(always)]
 fn band_limit(range_m: f32, view: &View) -> f32 {
-    range_m / (1.0 + view.depth_band)
+    range_m / view.band_factor
 }
 
 /// Pass 1 over the points of some cells: project each point once, take the minimum
@@ -1245,7 +1285,7 @@ fn accumulate(
         let sample = (u64::from(s.intensity()) << COUNT_BITS) | 1;
         // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
         let range_sample = (s.range_m() * RANGE_SCALE + 0.5) as i64 as u64;
-        let limit = band_limit(s.range_m(), view);
+        let limit = s.limit_m();
         s.for_each_pixel(view, |k| {
             let near = f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit;
             let [slot, range] = &accum[k];
@@ -1272,7 +1312,8 @@ fn accumulate(
 
 #[cfg(test)]
 mod tests {
-    //! The vectorised per-point kernels against their scalar references.
+    //! The vectorised per-point kernels against their scalar references, and the
+    //! occlusion test's rectangle against the splats it must hold.
 
     use glam::{Mat3, Vec3};
     use proptest::prelude::*;
@@ -1289,6 +1330,98 @@ mod tests {
             let half = halves as f32 * 0.5;
             prop_assert_eq!(floor_small(half), half.floor() as i32);
             prop_assert_eq!(floor_small(-x.abs() * 1e-6), (-x.abs() * 1e-6).floor() as i32);
+        }
+
+        /// The occlusion test's rectangle of a cell holds every pixel that a splat of a
+        /// point of the cell's bounding sphere covers: the disc bound (ξ ≤ 1) and the
+        /// annular sector (ξ > 1), for random intrinsics, spheres and splat sizes.
+        #[test]
+        fn image_rect_holds_every_splat(
+            seed in any::<u64>(),
+            alpha_u in 50.0f32..400.0,
+            aspect in 0.8f32..1.25,
+            skew in -3.0f32..3.0,
+            xi in 0.0f32..2.0,
+            direction in prop::array::uniform3(-1.0f32..1.0),
+            distance_m in 0.5f32..200.0,
+            radius_m in 0.02f32..3.0,
+            spacing_m in 0.005f32..0.3,
+            splat_scale in 0.5f32..3.0,
+            max_radius in 0u32..12,
+        ) {
+            let (alpha_v, u0, v0) = (alpha_u * aspect, 159.5f32, 119.5f32);
+            let camera = Camera::new(
+                Intrinsics {
+                    alpha_u: f64::from(alpha_u),
+                    alpha_v: f64::from(alpha_v),
+                    u0: f64::from(u0),
+                    v0: f64::from(v0),
+                    xi: f64::from(xi),
+                    skew: f64::from(skew),
+                },
+                None,
+                320,
+                240,
+                ValidRegion::Full,
+            )
+            .unwrap();
+            let renderer = Renderer::new(
+                camera.clone(),
+                RenderOptions { splat_scale, max_splat_radius_px: max_radius, ..RenderOptions::default() },
+            )
+            .unwrap();
+            let view = View {
+                undistorted: true,
+                alpha_u,
+                alpha_v,
+                skew,
+                u0,
+                v0,
+                rotation: Mat3::IDENTITY,
+                translation: Vec3::ZERO,
+                alpha: alpha_u.max(alpha_v),
+                xi,
+                width: 320,
+                height: 240,
+                splat_scale,
+                max_width: 2 * max_radius as i32 + 1,
+                affine_norm: affine_norm(f64::from(alpha_u), f64::from(alpha_v), f64::from(skew)),
+                depth_band: 0.02,
+                band_factor: 1.02,
+            };
+            let center = Vec3::from_array(direction).normalize_or(Vec3::Z) * distance_m;
+            let candidate = Candidate {
+                cell: DrawCell { start: 0, count: 1, spacing_m },
+                center,
+                radius: radius_m,
+                nearest_m: (distance_m - radius_m).max(0.0),
+            };
+            let Some([ru0, ru1, rv0, rv1]) = renderer.image_rect(&candidate, &view) else {
+                return Ok(()); // no bound claimed
+            };
+            let footprint = spacing_m * view.alpha * splat_scale;
+            let mut rng = crate::rng::SplitMix64::new(seed);
+            for _ in 0..256 {
+                // A point of the sphere (its surface included).
+                let offset = Vec3::new(
+                    rng.unit() as f32 * 2.0 - 1.0,
+                    rng.unit() as f32 * 2.0 - 1.0,
+                    rng.unit() as f32 * 2.0 - 1.0,
+                );
+                let offset = offset.clamp_length_max(1.0) * radius_m;
+                let p = center + offset;
+                let Some(splat) = project_point(&[p.x, p.y, p.z, 0.5], footprint, &view, &camera)
+                else {
+                    continue;
+                };
+                splat.for_each_pixel(&view, |k| {
+                    let (u, v) = (k % 320, k / 320);
+                    assert!(
+                        (ru0..=ru1).contains(&u) && (rv0..=rv1).contains(&v),
+                        "pixel ({u}, {v}) of a splat of {p} outside [{ru0}, {ru1}] x [{rv0}, {rv1}]"
+                    );
+                });
+            }
         }
 
         /// A block of points (of [`BLOCK`], and its first [`TAIL`] as a tail block)
@@ -1343,6 +1476,7 @@ mod tests {
                 max_width: 2 * max_radius + 1,
                 affine_norm: affine_norm(f64::from(alpha_u), f64::from(alpha_u * aspect), f64::from(skew)),
                 depth_band: 0.02,
+                band_factor: 1.02,
             };
             // Points at every scale: near the viewpoint, metres and kilometres away.
             let mut rng = crate::rng::SplitMix64::new(seed);

@@ -219,20 +219,43 @@ impl<T: Real> Params<T> {
             return Some([xd, yd]);
         }
         let tolerance = T::from_f64(64.0) * T::EPSILON * (T::ONE + xd.abs() + yd.abs());
+        // Newton's method inside the region before the fold, where the distortion is
+        // one to one: start from the distorted point, pulled towards the centre until it
+        // lies there (a distortion that expands near its fold puts the distorted point
+        // beyond it), and halve every step that would leave the region.
+        let half = T::from_f64(0.5);
         let (mut x, mut y) = (xd, yd);
-        for _ in 0..50 {
+        let mut pulls = 0;
+        while !self.before_fold(x, y) {
+            if pulls == 80 {
+                return None;
+            }
+            (x, y) = (x * half, y * half);
+            pulls += 1;
+        }
+        for _ in 0..60 {
             let [fx, fy] = self.distort(x, y);
             let (ex, ey) = (fx - xd, fy - yd);
             if ex.abs() <= tolerance && ey.abs() <= tolerance {
-                return self.before_fold(x, y).then_some([x, y]);
+                return Some([x, y]);
             }
             let [[a, b], [c, d]] = self.distortion_jacobian(x, y);
             let det = a * d - b * c;
             if !(det > T::ZERO) || !det.is_finite() {
                 return None;
             }
-            x -= (d * ex - b * ey) / det;
-            y -= (a * ey - c * ex) / det;
+            let (dx, dy) = ((d * ex - b * ey) / det, (a * ey - c * ex) / det);
+            let mut step = T::ONE;
+            let mut halvings = 0;
+            while !self.before_fold(x - step * dx, y - step * dy) {
+                if halvings == 60 {
+                    return None;
+                }
+                step = step * half;
+                halvings += 1;
+            }
+            x -= step * dx;
+            y -= step * dy;
         }
         let [fx, fy] = self.distort(x, y);
         let loose = T::from_f64(1e3) * tolerance;

@@ -43,15 +43,12 @@ fn limit(x: m128, lo: f32, hi: f32) -> m128 {
     min_m128(max_m128(x, splat(lo)), splat(hi))
 }
 
-/// [`super::first_px`].
+/// [`super::first_px`]: `round(x) − half`, with `half = (width − 1)/2`.
 #[inline(always)]
-fn first_px(x: m128, width: m128i, odd_offset: m128) -> m128i {
-    let one = set_splat_i32_m128i(1);
-    let odd = cmp_eq_mask_i32_m128i(bitand_m128i(width, one), one);
-    let offset = bitand_m128(cast_to_m128_from_m128i(odd), odd_offset);
+fn first_px(x: m128, half: m128i) -> m128i {
     sub_i32_m128i(
-        floor_small(add_m128(limit(x, -30_000.0, 30_000.0), offset)),
-        shr_imm_i32_m128i::<1>(sub_i32_m128i(width, one)),
+        floor_small(add_m128(limit(x, -30_000.0, 30_000.0), splat(0.5))),
+        half,
     )
 }
 
@@ -61,16 +58,20 @@ fn select(mask: m128i, a: m128i, b: m128i) -> m128i {
     bitor_m128i(bitand_m128i(mask, a), bitandnot_m128i(mask, b))
 }
 
-/// [`super::splat_width`].
+/// The half-width `(width − 1)/2` of [`super::splat_width`].
 #[inline(always)]
-fn splat_width(size: m128, max_width: m128i) -> m128i {
-    let w = limit(size, 1.0, 4000.0);
-    let t = floor_small(w);
+fn splat_half(size: m128, max_half: m128i) -> m128i {
+    let h = limit(
+        mul_m128(sub_m128(size, splat(1.0)), splat(0.5)),
+        0.0,
+        1000.0,
+    );
+    let t = floor_small(h);
     let up = sub_i32_m128i(
         t,
-        cast_to_m128i_from_m128(cmp_lt_mask_m128(convert_to_m128_from_i32_m128i(t), w)),
+        cast_to_m128i_from_m128(cmp_lt_mask_m128(convert_to_m128_from_i32_m128i(t), h)),
     );
-    select(cmp_gt_mask_i32_m128i(up, max_width), max_width, up)
+    select(cmp_gt_mask_i32_m128i(up, max_half), max_half, up)
 }
 
 /// The splats of [`super::project_block`], four points at a time (`N` is a multiple
@@ -98,14 +99,15 @@ pub(super) fn project_splats<const N: usize>(
     let (alpha_u, alpha_v, skew) = (splat(view.alpha_u), splat(view.alpha_v), splat(view.skew));
     let (u0, v0) = (splat(view.u0), splat(view.v0));
     let footprint = splat(footprint);
-    let max_width = set_splat_i32_m128i(view.max_width);
-    let (zero_i, half) = (zeroed_m128i(), splat(0.5));
+    let max_half = set_splat_i32_m128i((view.max_width - 1) >> 1);
+    let (zero_i, one_i) = (zeroed_m128i(), set_splat_i32_m128i(1));
     let (width, height) = (
         set_splat_i32_m128i(view.width),
         set_splat_i32_m128i(view.height),
     );
     let not_drawn = set_splat_i32_m128i(i32::from(NOT_DRAWN));
     let low_half = set_splat_i32_m128i(0xFFFF);
+    let band_factor = splat(view.band_factor);
     for base in (0..N).step_by(4) {
         // Four points [x, y, z, grey] transposed into x, y, z and grey of four points.
         let a = m128::from_array(points[base]);
@@ -138,8 +140,9 @@ pub(super) fn project_splats<const N: usize>(
             mul(footprint, inv_d),
             max_m128(mul(add(rho, mul(xi, pcz)), inv_d), one),
         );
-        let n = splat_width(size, max_width);
-        let (pu, pv) = (first_px(u, n, half), first_px(v, n, half));
+        let half = splat_half(size, max_half);
+        let n = add_i32_m128i(add_i32_m128i(half, half), one_i);
+        let (pu, pv) = (first_px(u, half), first_px(v, half));
         let in_image = bitand_m128i(
             bitand_m128i(
                 cmp_gt_mask_i32_m128i(add_i32_m128i(pu, n), zero_i),
@@ -156,7 +159,7 @@ pub(super) fn project_splats<const N: usize>(
             0.0,
             65535.0,
         ));
-        // The splats' words, [iu | iv << 16, width | intensity << 16, range, 0] per
+        // The splats' words, [iu | iv << 16, width | intensity << 16, range, limit] per
         // point, transposed from one vector per word to one per point.
         let words = [
             bitor_m128i(bitand_m128i(pu, low_half), shl_imm_u32_m128i::<16>(pv)),
@@ -165,7 +168,7 @@ pub(super) fn project_splats<const N: usize>(
                 shl_imm_u32_m128i::<16>(intensity),
             ),
             cast_to_m128i_from_m128(rho),
-            zero_i,
+            cast_to_m128i_from_m128(div_m128(rho, band_factor)),
         ];
         let (w01_lo, w23_lo) = (
             unpack_low_i32_m128i(words[0], words[1]),
