@@ -251,7 +251,7 @@ impl<T: Real> Params<T> {
                 if halvings == 60 {
                     return None;
                 }
-                step = step * half;
+                step *= half;
                 halvings += 1;
             }
             x -= step * dx;
