@@ -227,6 +227,33 @@ struct View {
     band_factor: f32,
 }
 
+impl View {
+    /// The constants of a rendering with `camera` and `options` from the pose
+    /// `rotation`, `translation` (camera from the cloud's frame).
+    fn new(camera: &Camera, options: &RenderOptions, rotation: Mat3, translation: Vec3) -> Self {
+        let i = camera.intrinsics();
+        Self {
+            undistorted: camera.distortion().is_none(),
+            alpha_u: i.alpha_u as f32,
+            alpha_v: i.alpha_v as f32,
+            skew: i.skew as f32,
+            u0: i.u0 as f32,
+            v0: i.v0 as f32,
+            rotation,
+            translation,
+            alpha: i.alpha_u.max(i.alpha_v) as f32,
+            xi: i.xi as f32,
+            width: camera.width() as i32,
+            height: camera.height() as i32,
+            splat_scale: options.splat_scale,
+            max_width: 2 * options.max_splat_radius_px.min(16_000) as i32 + 1,
+            affine_norm: affine_norm(i.alpha_u, i.alpha_v, i.skew),
+            depth_band: options.depth_band,
+            band_factor: 1.0 + options.depth_band,
+        }
+    }
+}
+
 /// A renderer for one camera, owning its buffers (no allocation per frame once warm).
 #[derive(Debug)]
 pub struct Renderer {
@@ -361,26 +388,7 @@ impl Renderer {
         // Points are relative to the cloud's origin: fold it into the translation (f64).
         let translation = camera_from_world.transform_point(cloud.origin());
         let (rotation, _) = camera_from_world.to_f32();
-        let i = self.camera.intrinsics();
-        let view = View {
-            undistorted: self.camera.distortion().is_none(),
-            alpha_u: i.alpha_u as f32,
-            alpha_v: i.alpha_v as f32,
-            skew: i.skew as f32,
-            u0: i.u0 as f32,
-            v0: i.v0 as f32,
-            rotation,
-            translation: translation.as_vec3(),
-            alpha: i.alpha_u.max(i.alpha_v) as f32,
-            xi: i.xi as f32,
-            width: self.camera.width() as i32,
-            height: self.camera.height() as i32,
-            splat_scale: self.options.splat_scale,
-            max_width: 2 * self.options.max_splat_radius_px.min(16_000) as i32 + 1,
-            affine_norm: affine_norm(i.alpha_u, i.alpha_v, i.skew),
-            depth_band: self.options.depth_band,
-            band_factor: 1.0 + self.options.depth_band,
-        };
+        let view = View::new(&self.camera, &self.options, rotation, translation.as_vec3());
 
         self.select_cells(cloud, &view);
         let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
@@ -1321,6 +1329,39 @@ mod tests {
 
     use super::*;
 
+    /// A 320×240 camera without distortion, its principal point at the centre, and
+    /// rendering options with the given splats.
+    fn test_setup(
+        alpha_u: f32,
+        aspect: f32,
+        skew: f32,
+        xi: f32,
+        splat_scale: f32,
+        max_radius: u32,
+    ) -> (Camera, RenderOptions) {
+        let camera = Camera::new(
+            Intrinsics {
+                alpha_u: f64::from(alpha_u),
+                alpha_v: f64::from(alpha_u * aspect),
+                u0: 159.5,
+                v0: 119.5,
+                xi: f64::from(xi),
+                skew: f64::from(skew),
+            },
+            None,
+            320,
+            240,
+            ValidRegion::Full,
+        )
+        .unwrap();
+        let options = RenderOptions {
+            splat_scale,
+            max_splat_radius_px: max_radius,
+            ..RenderOptions::default()
+        };
+        (camera, options)
+    }
+
     proptest! {
         /// `floor_small` is `floor` over its whole domain, halves and negative values
         /// included.
@@ -1349,46 +1390,9 @@ mod tests {
             splat_scale in 0.5f32..3.0,
             max_radius in 0u32..12,
         ) {
-            let (alpha_v, u0, v0) = (alpha_u * aspect, 159.5f32, 119.5f32);
-            let camera = Camera::new(
-                Intrinsics {
-                    alpha_u: f64::from(alpha_u),
-                    alpha_v: f64::from(alpha_v),
-                    u0: f64::from(u0),
-                    v0: f64::from(v0),
-                    xi: f64::from(xi),
-                    skew: f64::from(skew),
-                },
-                None,
-                320,
-                240,
-                ValidRegion::Full,
-            )
-            .unwrap();
-            let renderer = Renderer::new(
-                camera.clone(),
-                RenderOptions { splat_scale, max_splat_radius_px: max_radius, ..RenderOptions::default() },
-            )
-            .unwrap();
-            let view = View {
-                undistorted: true,
-                alpha_u,
-                alpha_v,
-                skew,
-                u0,
-                v0,
-                rotation: Mat3::IDENTITY,
-                translation: Vec3::ZERO,
-                alpha: alpha_u.max(alpha_v),
-                xi,
-                width: 320,
-                height: 240,
-                splat_scale,
-                max_width: 2 * max_radius as i32 + 1,
-                affine_norm: affine_norm(f64::from(alpha_u), f64::from(alpha_v), f64::from(skew)),
-                depth_band: 0.02,
-                band_factor: 1.02,
-            };
+            let (camera, options) = test_setup(alpha_u, aspect, skew, xi, splat_scale, max_radius);
+            let renderer = Renderer::new(camera.clone(), options).unwrap();
+            let view = View::new(&camera, &options, Mat3::IDENTITY, Vec3::ZERO);
             let center = Vec3::from_array(direction).normalize_or(Vec3::Z) * distance_m;
             let candidate = Candidate {
                 cell: DrawCell { start: 0, count: 1, spacing_m },
@@ -1439,45 +1443,18 @@ mod tests {
             xi in 0.0f32..2.5,
             spacing_m in 0.001f32..0.5,
             splat_scale in 0.5f32..3.0,
-            max_radius in 0i32..12,
+            max_radius in 0u32..12,
         ) {
-            let camera = Camera::new(
-                Intrinsics {
-                    alpha_u: f64::from(alpha_u),
-                    alpha_v: f64::from(alpha_u * aspect),
-                    u0: 159.5,
-                    v0: 119.5,
-                    xi: f64::from(xi),
-                    skew: f64::from(skew),
-                },
-                None,
-                320,
-                240,
-                ValidRegion::Full,
-            )
-            .unwrap();
-            let view = View {
-                undistorted: true,
-                alpha_u,
-                alpha_v: alpha_u * aspect,
-                skew,
-                u0: 159.5,
-                v0: 119.5,
-                rotation: Mat3::from_axis_angle(
+            let (camera, options) = test_setup(alpha_u, aspect, skew, xi, splat_scale, max_radius);
+            let view = View::new(
+                &camera,
+                &options,
+                Mat3::from_axis_angle(
                     Vec3::from_array(axis_angle).normalize_or(Vec3::Z),
                     Vec3::from_array(axis_angle).length(),
                 ),
-                translation: Vec3::from_array(translation),
-                alpha: alpha_u.max(alpha_u * aspect),
-                xi,
-                width: 320,
-                height: 240,
-                splat_scale,
-                max_width: 2 * max_radius + 1,
-                affine_norm: affine_norm(f64::from(alpha_u), f64::from(alpha_u * aspect), f64::from(skew)),
-                depth_band: 0.02,
-                band_factor: 1.02,
-            };
+                Vec3::from_array(translation),
+            );
             // Points at every scale: near the viewpoint, metres and kilometres away.
             let mut rng = crate::rng::SplitMix64::new(seed);
             let mut points = [[0f32; 4]; BLOCK];
