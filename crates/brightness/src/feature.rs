@@ -3,12 +3,16 @@
 use frame::AnyImage;
 use ucm::{Camera, PixelGrid};
 
-use crate::{BrightnessError, masked_gradient};
+use crate::BrightnessError;
+use crate::gradient::MaskedGradient;
 
 /// The brightness feature of one camera, with its buffers (no allocation per image).
 #[derive(Debug, Clone)]
 pub struct Brightness {
     grid: PixelGrid,
+    gradient_plan: MaskedGradient,
+    /// `[start, end)` row-major runs of valid pixels.
+    valid_runs: Vec<[u32; 2]>,
     width: usize,
     height: usize,
     samples: Vec<u32>,
@@ -35,8 +39,19 @@ impl Brightness {
             .collect();
         let n = camera.pixel_count();
         let m = samples.len();
+        let (width, height) = (camera.width() as usize, camera.height() as usize);
+        let gradient_plan = MaskedGradient::new(grid.valid(), width, height);
+        let mut valid_runs: Vec<[u32; 2]> = Vec::new();
+        for &k in &samples {
+            match valid_runs.last_mut() {
+                Some(run) if run[1] == k => run[1] += 1,
+                _ => valid_runs.push([k, k + 1]),
+            }
+        }
         Self {
             grid,
+            gradient_plan,
+            valid_runs,
             width: camera.width() as usize,
             height: camera.height() as usize,
             samples,
@@ -64,6 +79,20 @@ impl Brightness {
     /// Pixels not observed are ignored (intensity 0); sky pixels, and every pixel of a
     /// measured image, have `1/ρ = 0`.
     pub fn compute(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
+        self.compute_pixels(picture)?;
+        for (s, &k) in self.samples.iter().enumerate() {
+            self.values[s] = self.image[k as usize];
+            self.interaction[s] = self.pixel_interaction[k as usize];
+        }
+        Ok(())
+    }
+
+    /// The per-pixel part of [`Brightness::compute`] only: [`Brightness::image`],
+    /// [`Brightness::inverse_range`], [`Brightness::gradient`] and
+    /// [`Brightness::pixel_interaction`], what a feature of the whole image (the PGM)
+    /// reads. [`Brightness::values`] and [`Brightness::interaction`] keep what the
+    /// last [`Brightness::compute`] gave.
+    pub fn compute_pixels(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
         if picture.width() as usize != self.width || picture.height() as usize != self.height {
             return Err(BrightnessError::ImageSize {
                 got_width: picture.width(),
@@ -106,24 +135,21 @@ impl Brightness {
             }
             self.scale = scale as f32;
         }
-        masked_gradient(
-            &self.image,
-            valid,
-            self.width,
-            self.height,
-            &mut self.gradient,
-        );
+        // The gradient and the interaction rows are zero outside the region from the
+        // start, and only the region is written.
+        self.gradient_plan
+            .compute(&self.image, valid, &mut self.gradient);
         let factors = self.grid.factors();
-        for k in 0..self.image.len() {
-            self.pixel_interaction[k] = if valid[k] {
-                factors[k].photometric(self.gradient[k], self.inverse_range[k])
-            } else {
-                [0.0; 6]
-            };
-        }
-        for (s, &k) in self.samples.iter().enumerate() {
-            self.values[s] = self.image[k as usize];
-            self.interaction[s] = self.pixel_interaction[k as usize];
+        for &[start, end] in &self.valid_runs {
+            let run = start as usize..end as usize;
+            for (((l, f), &g), &r) in self.pixel_interaction[run.clone()]
+                .iter_mut()
+                .zip(&factors[run.clone()])
+                .zip(&self.gradient[run.clone()])
+                .zip(&self.inverse_range[run])
+            {
+                *l = f.photometric(g, r);
+            }
         }
         Ok(())
     }

@@ -6,7 +6,8 @@
 //! (tested). The row pass keeps 32 neighbouring outputs in registers over all taps;
 //! the column pass is an `axpy` over whole rows, one tap at a time (the same in
 //! registers was 3× slower: the taps' rows, 1280 bytes apart at 320 pixels, fall on a
-//! few L1 cache sets). Both vectorise. Rows (and output rows of the column pass) are
+//! few L1 cache sets). Both vectorise, on the widest instruction set [`pulp`] detects
+//! at run time (the same bits on every one: no fused multiply-add). Rows (and output rows of the column pass) are
 //! independent: with `parallel`, they are spread over rayon's threads, and the result
 //! does not depend on the thread count.
 
@@ -111,8 +112,50 @@ thread_local! {
 }
 
 /// One row of [`rows`]; `pad` holds at least `width + kernel.len() + LANES` values
-/// and is zero outside the span's copy (restored before returning).
-fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], [a, b]: Span, pad: &mut [f32]) {
+/// and is zero outside the span's copy (restored before returning). Run on the
+/// instruction set detected at run time ([`Simd`]).
+fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], span: Span, pad: &mut [f32]) {
+    pulp::Arch::new().dispatch(RowOp {
+        s,
+        d,
+        width,
+        kernel,
+        span,
+        pad,
+    });
+}
+
+/// The arguments of [`row`], run by [`pulp`] on the widest instruction set it
+/// detects (AVX2 or AVX-512 here): the same operations in the same order on wider
+/// vectors, without fused multiply-adds, so every instruction set gives the same bits.
+struct RowOp<'a> {
+    s: &'a [f32],
+    d: &'a mut [f32],
+    width: usize,
+    kernel: &'a [f32],
+    span: Span,
+    pad: &'a mut [f32],
+}
+
+impl pulp::WithSimd for RowOp<'_> {
+    type Output = ();
+
+    /// Generic over the instruction set: each one gets its own copy of the loops.
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        row_inline(self.s, self.d, self.width, self.kernel, self.span, self.pad);
+    }
+}
+
+#[inline(always)]
+fn row_inline(
+    s: &[f32],
+    d: &mut [f32],
+    width: usize,
+    kernel: &[f32],
+    [a, b]: Span,
+    pad: &mut [f32],
+) {
     let r = (kernel.len() - 1) / 2;
     let (a, b) = (a.min(width), b.min(width));
     d.fill(0.0);
@@ -166,17 +209,16 @@ pub fn add_columns(
     out: &[(usize, Span)],
     parallel: bool,
 ) {
-    let r = (kernel.len() - 1) / 2;
-    let one = |y: usize, [a, b]: Span, d: &mut [f32]| {
-        let k0 = r.saturating_sub(y);
-        let k1 = (kernel.len()).min(height + r - y);
-        for ki in k0..k1 {
-            let c = kernel[ki];
-            let yy = y + ki - r;
-            for (o, &i) in d[a..b].iter_mut().zip(&src[yy * width + a..yy * width + b]) {
-                *o += c * i;
-            }
-        }
+    let one = |y: usize, span: Span, d: &mut [f32]| {
+        pulp::Arch::new().dispatch(ColumnOp {
+            src,
+            d,
+            y,
+            span,
+            width,
+            height,
+            kernel,
+        })
     };
     if parallel {
         dst.par_chunks_exact_mut(width)
@@ -190,6 +232,44 @@ pub fn add_columns(
     } else {
         for &(y, span) in out {
             one(y, span, &mut dst[y * width..(y + 1) * width]);
+        }
+    }
+}
+
+/// One output row of [`add_columns`], run by [`pulp`] like [`RowOp`].
+struct ColumnOp<'a> {
+    src: &'a [f32],
+    d: &'a mut [f32],
+    y: usize,
+    span: Span,
+    width: usize,
+    height: usize,
+    kernel: &'a [f32],
+}
+
+impl pulp::WithSimd for ColumnOp<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let Self {
+            src,
+            d,
+            y,
+            span: [a, b],
+            width,
+            height,
+            kernel,
+        } = self;
+        let r = (kernel.len() - 1) / 2;
+        let k0 = r.saturating_sub(y);
+        let k1 = (kernel.len()).min(height + r - y);
+        for ki in k0..k1 {
+            let c = kernel[ki];
+            let yy = y + ki - r;
+            for (o, &i) in d[a..b].iter_mut().zip(&src[yy * width + a..yy * width + b]) {
+                *o += c * i;
+            }
         }
     }
 }

@@ -299,7 +299,7 @@ impl Pgm {
     /// `G(I, λ)` at the samples only (for the desired image).
     pub fn transform(&mut self, picture: &impl AnyImage, lambda: f32) -> Result<&[f32], PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute(picture)?;
+        self.brightness.compute_pixels(picture)?;
         if let Some(f) = self.filters(lambda) {
             self.recursive_g_j(&f, false);
             return Ok(&self.values);
@@ -339,7 +339,7 @@ impl Pgm {
         jacobian: PgmJacobian,
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute(picture)?;
+        self.brightness.compute_pixels(picture)?;
         if let Some(f) = self.filters(lambda) {
             self.recursive_g_j(&f, true);
             match jacobian {
