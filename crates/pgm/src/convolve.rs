@@ -6,8 +6,8 @@
 //! (tested). The row pass keeps 32 neighbouring outputs in registers over all taps;
 //! the column pass is an `axpy` over whole rows, one tap at a time (the same in
 //! registers was 3× slower: the taps' rows, 1280 bytes apart at 320 pixels, fall on a
-//! few L1 cache sets). Both vectorise, on the widest instruction set [`pulp`] detects
-//! at run time (the same bits on every one: no fused multiply-add). Rows (and output rows of the column pass) are
+//! few L1 cache sets). Both vectorise, on the widest instruction set found at run time
+//! (the same bits on every one). Rows (and output rows of the column pass) are
 //! independent: with `parallel`, they are spread over rayon's threads, and the result
 //! does not depend on the thread count.
 
@@ -112,10 +112,9 @@ thread_local! {
 }
 
 /// One row of [`rows`]; `pad` holds at least `width + kernel.len() + LANES` values
-/// and is zero outside the span's copy (restored before returning). Run on the
-/// instruction set detected at run time ([`Simd`]).
+/// and is zero outside the span's copy (restored before returning).
 fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], span: Span, pad: &mut [f32]) {
-    pulp::Arch::new().dispatch(RowOp {
+    crate::simd::on_widest(RowOp {
         s,
         d,
         width,
@@ -125,9 +124,7 @@ fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], span: Span, pad: 
     });
 }
 
-/// The arguments of [`row`], run by [`pulp`] on the widest instruction set it
-/// detects (AVX2 or AVX-512 here): the same operations in the same order on wider
-/// vectors, without fused multiply-adds, so every instruction set gives the same bits.
+/// The arguments of [`row`], a [`crate::simd::Kernel`].
 struct RowOp<'a> {
     s: &'a [f32],
     d: &'a mut [f32],
@@ -137,12 +134,9 @@ struct RowOp<'a> {
     pad: &'a mut [f32],
 }
 
-impl pulp::WithSimd for RowOp<'_> {
-    type Output = ();
-
-    /// Generic over the instruction set: each one gets its own copy of the loops.
+impl crate::simd::Kernel for RowOp<'_> {
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
+    fn run(self) {
         row_inline(self.s, self.d, self.width, self.kernel, self.span, self.pad);
     }
 }
@@ -210,7 +204,7 @@ pub fn add_columns(
     parallel: bool,
 ) {
     let one = |y: usize, span: Span, d: &mut [f32]| {
-        pulp::Arch::new().dispatch(ColumnOp {
+        crate::simd::on_widest(ColumnOp {
             src,
             d,
             y,
@@ -236,7 +230,7 @@ pub fn add_columns(
     }
 }
 
-/// One output row of [`add_columns`], run by [`pulp`] like [`RowOp`].
+/// One output row of [`add_columns`], a [`crate::simd::Kernel`].
 struct ColumnOp<'a> {
     src: &'a [f32],
     d: &'a mut [f32],
@@ -247,11 +241,9 @@ struct ColumnOp<'a> {
     kernel: &'a [f32],
 }
 
-impl pulp::WithSimd for ColumnOp<'_> {
-    type Output = ();
-
+impl crate::simd::Kernel for ColumnOp<'_> {
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
+    fn run(self) {
         let Self {
             src,
             d,

@@ -4,6 +4,7 @@
 pub mod convolve;
 mod error;
 pub mod recursive;
+mod simd;
 mod transform;
 
 pub use error::PgmError;

@@ -27,9 +27,8 @@
 //! Passes run down the columns of a row-major plane, with stripes of rows as vectors
 //! (interleaved channels are filtered together); the caller transposes the plane to
 //! filter along its rows. Precision: `f32` arithmetic, `f64` design. The loops run on
-//! the widest instruction set [`pulp`] detects at run time (AVX2 or AVX-512 on this
-//! project's machines, SSE2 on any x86-64), with the same operations in the same order
-//! and no fused multiply-add: every machine and build gives the same bits (tested).
+//! the widest instruction set found at run time (AVX2 or AVX-512 on this project's
+//! machines, SSE2 on any x86-64), with the same bits on every one (tested).
 
 /// Pole pairs `(b, ω)` (units of `1/λ`) of the three sections of each kernel: found
 /// by minimising the fit's RMS error over the poles (Nelder–Mead on the continuous
@@ -365,7 +364,7 @@ pub fn columns(
     mode: Mode,
     scratch: &mut Scratch,
 ) {
-    pulp::Arch::new().dispatch(ColumnsOp {
+    crate::simd::on_widest(ColumnsOp {
         src,
         dst,
         width,
@@ -376,10 +375,7 @@ pub fn columns(
     });
 }
 
-/// The arguments of [`columns`], run by [`pulp`] on the widest instruction set it
-/// detects (AVX2 or AVX-512 here, SSE2 on any x86-64): the same operations in the
-/// same order on wider vectors, without fused multiply-adds, so every instruction set
-/// gives the same bits (tested).
+/// The arguments of [`columns`], a [`crate::simd::Kernel`].
 struct ColumnsOp<'a> {
     src: &'a [f32],
     dst: &'a mut [f32],
@@ -390,23 +386,11 @@ struct ColumnsOp<'a> {
     scratch: &'a mut Scratch,
 }
 
-impl pulp::WithSimd for ColumnsOp<'_> {
-    type Output = ();
-
-    /// Generic over the instruction set, so that each one gets its own copy of the
-    /// loops, compiled for it.
+impl crate::simd::Kernel for ColumnsOp<'_> {
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        let Self {
-            src,
-            dst,
-            width,
-            height,
-            filter,
-            mode,
-            scratch,
-        } = self;
-        columns_inline(src, dst, width, height, filter, mode, scratch);
+    fn run(self) {
+        let o = self;
+        columns_inline(o.src, o.dst, o.width, o.height, o.filter, o.mode, o.scratch);
     }
 }
 
@@ -575,18 +559,15 @@ mod tests {
                     mode,
                     &mut Scratch::default(),
                 );
-                pulp::Simd::vectorize(
-                    pulp::Scalar,
-                    ColumnsOp {
-                        src: &src,
-                        dst: &mut scalar,
-                        width,
-                        height,
-                        filter: &filter,
-                        mode,
-                        scratch: &mut Scratch::default(),
-                    },
-                );
+                crate::simd::on_scalar(ColumnsOp {
+                    src: &src,
+                    dst: &mut scalar,
+                    width,
+                    height,
+                    filter: &filter,
+                    mode,
+                    scratch: &mut Scratch::default(),
+                });
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&fast), bits(&scalar), "{shape:?} {mode:?}");
             }
