@@ -88,7 +88,9 @@ impl MaskedGradient {
         for k in 0..width * height {
             if inside(k) {
                 match interior.last_mut() {
-                    Some(run) if run[1] as usize == k && k % width != 0 => run[1] += 1,
+                    // Interior pixels are never in the first or last column: a run
+                    // never crosses a row.
+                    Some(run) if run[1] as usize == k => run[1] += 1,
                     _ => interior.push([k as u32, k as u32 + 1]),
                 }
             } else if valid[k] {
