@@ -247,6 +247,43 @@ pub enum Mode {
     Add,
 }
 
+/// The part of a row-major plane a pass computes: the columns `columns` (element
+/// indices within a row) of the rows `rows`. The PGM's planes are zero outside the
+/// bounding box of the camera's valid region, so its passes compute that box alone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    /// First and one-past-last column.
+    pub columns: [usize; 2],
+    /// First and one-past-last row.
+    pub rows: [usize; 2],
+}
+
+impl Window {
+    /// The whole `width × height` plane.
+    pub fn whole(width: usize, height: usize) -> Self {
+        Self {
+            columns: [0, width],
+            rows: [0, height],
+        }
+    }
+
+    /// The same window in the transposed plane.
+    pub fn transposed(self) -> Self {
+        Self {
+            columns: self.rows,
+            rows: self.columns,
+        }
+    }
+
+    /// The same window over pixels of `channels` interleaved elements.
+    pub fn interleaved(self, channels: usize) -> Self {
+        Self {
+            columns: self.columns.map(|c| c * channels),
+            rows: self.rows,
+        }
+    }
+}
+
 /// Scratch buffers of the recursive passes (reused: no allocation per image once
 /// warm).
 #[derive(Clone, Debug, Default)]
@@ -285,15 +322,15 @@ impl Coefficients {
     }
 }
 
-/// One sweep of the three sections down or up the rows of the stripe
-/// `[x0, x0 + n)`, handing `emit(row, sums)` the sum of the sections' outputs at
-/// every row, row after row.
+/// One sweep of the three sections down or up the rows `[r0, r1)` of the stripe
+/// `[x0, x0 + n)` (the input taken as zero before them), handing `emit(row, sums)`
+/// the sum of the sections' outputs at every row, row after row.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn sweep(
     src: &[f32],
     width: usize,
-    height: usize,
+    [r0, r1]: [usize; 2],
     [x0, n]: [usize; 2],
     c: Coefficients,
     down: bool,
@@ -309,8 +346,8 @@ fn sweep(
     let (sum, state) = state.split_at_mut(n);
     let (s0, rest) = state.split_at_mut(2 * n);
     let (s1, s2) = rest.split_at_mut(2 * n);
-    let row = |t: usize| if down { t } else { height - 1 - t };
-    for t in 0..height {
+    let row = |t: usize| if down { r0 + t } else { r1 - 1 - t };
+    for t in 0..r1 - r0 {
         let line = |back: usize| -> &[f32] {
             if t >= back {
                 &src[row(t - back) * width + x0..][..n]
@@ -352,23 +389,32 @@ fn older_newer(s: &mut [f32], n: usize, t: usize) -> (&mut [f32], &mut [f32]) {
     if t.is_multiple_of(2) { (a, b) } else { (b, a) }
 }
 
-/// Correlate every column of the row-major `width × height` plane `src` with
-/// `filter`, into `dst` (written or added to, by `mode`). Interleaved channels
-/// (`[f32; C]` pixels) are filtered by passing `width = C × pixels per row`.
+/// Correlate the columns of `window` in the row-major plane `src` (`width` elements
+/// per row) with `filter`, `src` taken as zero outside the window's rows, into `dst`
+/// (written or added to, by `mode`) inside the window only. Interleaved channels
+/// (`[f32; C]` pixels) are filtered by passing `width = C × pixels per row` and the
+/// window's columns times `C` ([`Window::interleaved`]).
+///
+/// Panics if the window does not fit in both planes.
 pub fn columns(
     src: &[f32],
     dst: &mut [f32],
     width: usize,
-    height: usize,
+    window: Window,
     filter: &Recursive,
     mode: Mode,
     scratch: &mut Scratch,
 ) {
+    let ([c0, c1], [r0, r1]) = (window.columns, window.rows);
+    assert!(
+        c0 <= c1 && c1 <= width && r0 <= r1 && r1 * width <= src.len().min(dst.len()),
+        "window {window:?} outside a plane of {width} columns"
+    );
     crate::simd::on_widest(ColumnsOp {
         src,
         dst,
         width,
-        height,
+        window,
         filter,
         mode,
         scratch,
@@ -380,7 +426,7 @@ struct ColumnsOp<'a> {
     src: &'a [f32],
     dst: &'a mut [f32],
     width: usize,
-    height: usize,
+    window: Window,
     filter: &'a Recursive,
     mode: Mode,
     scratch: &'a mut Scratch,
@@ -390,7 +436,7 @@ impl crate::simd::Kernel for ColumnsOp<'_> {
     #[inline(always)]
     fn run(self) {
         let o = self;
-        columns_inline(o.src, o.dst, o.width, o.height, o.filter, o.mode, o.scratch);
+        columns_inline(o.src, o.dst, o.width, o.window, o.filter, o.mode, o.scratch);
     }
 }
 
@@ -400,28 +446,32 @@ fn columns_inline(
     src: &[f32],
     dst: &mut [f32],
     width: usize,
-    height: usize,
+    window: Window,
     filter: &Recursive,
     mode: Mode,
     scratch: &mut Scratch,
 ) {
-    let n = STRIPE.min(width);
+    let ([c0, c1], rows) = (window.columns, window.rows);
+    let height = rows[1] - rows[0];
+    let n = STRIPE.min(c1 - c0);
     scratch.state.resize(8 * n, 0.0);
     let mut causal = std::mem::take(&mut scratch.causal);
     causal.resize(height * n, 0.0);
     let (center, sigma) = (filter.center, filter.symmetry);
     let c = Coefficients::of(filter);
-    for x0 in (0..width).step_by(STRIPE) {
-        let n = STRIPE.min(width - x0);
-        sweep(src, width, height, [x0, n], c, true, scratch, |y, sum| {
+    for x0 in (c0..c1).step_by(STRIPE) {
+        let n = STRIPE.min(c1 - x0);
+        sweep(src, width, rows, [x0, n], c, true, scratch, |y, sum| {
+            let y = y - rows[0];
             causal[y * n..(y + 1) * n].copy_from_slice(sum);
         });
-        sweep(src, width, height, [x0, n], c, false, scratch, |y, a| {
+        sweep(src, width, rows, [x0, n], c, false, scratch, |y, a| {
+            let yc = y - rows[0];
             let at = y * width + x0;
             let rows = dst[at..at + n]
                 .iter_mut()
                 .zip(&src[at..at + n])
-                .zip(&causal[y * n..(y + 1) * n])
+                .zip(&causal[yc * n..(yc + 1) * n])
                 .zip(a);
             match mode {
                 Mode::Write => {
@@ -440,13 +490,20 @@ fn columns_inline(
     scratch.causal = causal;
 }
 
-/// `dst[x · height + y] = src[y · width + x]`, in blocks of 8 × 8 elements.
-pub fn transpose<T: Copy>(src: &[T], dst: &mut [T], width: usize, height: usize) {
+/// `dst[x · height + y] = src[y · width + x]` for the pixels `(x, y)` of `window`
+/// (columns and rows of `src`), in blocks of 8 × 8 elements; `dst` is left as it was
+/// elsewhere. Panics if the window is outside the `width × height` planes.
+pub fn transpose<T: Copy>(src: &[T], dst: &mut [T], width: usize, height: usize, window: Window) {
     const B: usize = 8;
-    for y0 in (0..height).step_by(B) {
-        let y1 = (y0 + B).min(height);
-        for x0 in (0..width).step_by(B) {
-            for x in x0..(x0 + B).min(width) {
+    let ([c0, c1], [r0, r1]) = (window.columns, window.rows);
+    assert!(
+        c0 <= c1 && c1 <= width && r0 <= r1 && r1 <= height,
+        "window {window:?} outside a {width} × {height} plane"
+    );
+    for y0 in (r0..r1).step_by(B) {
+        let y1 = (y0 + B).min(r1);
+        for x0 in (c0..c1).step_by(B) {
+            for x in x0..(x0 + B).min(c1) {
                 let out = &mut dst[x * height + y0..x * height + y1];
                 for (o, y) in out.iter_mut().zip(y0..y1) {
                     *o = src[y * width + x];
@@ -515,7 +572,7 @@ mod tests {
                 &src,
                 &mut dst,
                 width,
-                height,
+                Window::whole(width, height),
                 &filter,
                 Mode::Add,
                 &mut scratch,
@@ -550,11 +607,15 @@ mod tests {
             for mode in [Mode::Write, Mode::Add] {
                 let mut fast = vec![0.25f32; width * height];
                 let mut scalar = fast.clone();
+                let window = Window {
+                    columns: [6, width - 12],
+                    rows: [2, height - 1],
+                };
                 columns(
                     &src,
                     &mut fast,
                     width,
-                    height,
+                    window,
                     &filter,
                     mode,
                     &mut Scratch::default(),
@@ -563,7 +624,7 @@ mod tests {
                     src: &src,
                     dst: &mut scalar,
                     width,
-                    height,
+                    window,
                     filter: &filter,
                     mode,
                     scratch: &mut Scratch::default(),
@@ -574,15 +635,82 @@ mod tests {
         }
     }
 
+    /// A pass over a window of a plane that is zero outside the window's rows gives,
+    /// inside the window, the values of the pass over the whole plane, and leaves
+    /// the rest of the destination as it was; for both modes and interleaved
+    /// channels.
     #[test]
-    fn transpose_moves_every_element() {
+    fn a_window_is_the_whole_pass_inside_it() {
+        let (pixels, height, channels) = (90, 50, 6);
+        let width = pixels * channels;
+        let window = Window {
+            columns: [17, 70],
+            rows: [9, 41],
+        }
+        .interleaved(channels);
+        let src: Vec<f32> = (0..width * height)
+            .map(|k| {
+                let (x, y) = (k % width, k / width);
+                let inside = (window.rows[0]..window.rows[1]).contains(&y);
+                // Zero outside the rows; the columns outside the window hold data the
+                // window pass must not read.
+                if inside {
+                    ((k * 7919) % 1000) as f32 / 1000.0 - 0.3 + x as f32 * 1e-3
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for shape in [Shape::Gaussian, Shape::SquaredOffset, Shape::Derivative] {
+            let filter = Recursive::new(shape, 5.5);
+            for mode in [Mode::Write, Mode::Add] {
+                let mut whole = vec![0.25f32; width * height];
+                let mut part = whole.clone();
+                let mut scratch = Scratch::default();
+                let all = Window::whole(width, height);
+                columns(&src, &mut whole, width, all, &filter, mode, &mut scratch);
+                columns(&src, &mut part, width, window, &filter, mode, &mut scratch);
+                for y in 0..height {
+                    for x in 0..width {
+                        let k = y * width + x;
+                        let inside = (window.rows[0]..window.rows[1]).contains(&y)
+                            && (window.columns[0]..window.columns[1]).contains(&x);
+                        let want = if inside { whole[k] } else { 0.25 };
+                        assert_eq!(part[k], want, "{shape:?} {mode:?} ({x}, {y})");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn transpose_moves_every_element_of_the_window() {
         let (w, h) = (13, 10);
         let src: Vec<u32> = (0..w * h).collect();
         let mut dst = vec![0; (w * h) as usize];
-        transpose(&src, &mut dst, w as usize, h as usize);
+        transpose(
+            &src,
+            &mut dst,
+            w as usize,
+            h as usize,
+            Window::whole(13, 10),
+        );
         for y in 0..h {
             for x in 0..w {
                 assert_eq!(dst[(x * h + y) as usize], y * w + x);
+            }
+        }
+        let window = Window {
+            columns: [2, 11],
+            rows: [1, 10],
+        };
+        let mut dst = vec![u32::MAX; (w * h) as usize];
+        transpose(&src, &mut dst, w as usize, h as usize, window);
+        for y in 0..h {
+            for x in 0..w {
+                let inside = (1..10).contains(&y) && (2..11).contains(&x);
+                let want = if inside { y * w + x } else { u32::MAX };
+                assert_eq!(dst[(x * h + y) as usize], want);
             }
         }
     }

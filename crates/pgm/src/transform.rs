@@ -7,7 +7,7 @@ use ucm::Camera;
 
 use crate::PgmError;
 use crate::convolve::{self, Kernels, Span};
-use crate::recursive::{self, Mode, Recursive, Scratch, Shape};
+use crate::recursive::{self, Mode, Recursive, Scratch, Shape, Window};
 
 /// Supported Gaussian extents, pixels.
 pub const LAMBDA_RANGE: std::ops::RangeInclusive<f32> = 0.5..=40.0;
@@ -154,6 +154,9 @@ pub struct Pgm {
     /// Per image row, the columns spanned by its valid pixels (the image and `L_I` are
     /// zero elsewhere).
     row_spans: Vec<Span>,
+    /// The bounding box of the valid region: the image and `L_I` are zero outside
+    /// it, and every sample is inside it, so the recursive passes compute it alone.
+    window: Window,
     edge_distance_px: Vec<f32>,
     // Full-image planes.
     kernels: Kernels,
@@ -229,6 +232,28 @@ impl Pgm {
                 },
             )
             .collect();
+        let rows_seen: Vec<usize> = (0..height).filter(|&y| row_spans[y][1] > 0).collect();
+        let window = match (rows_seen.first(), rows_seen.last()) {
+            (Some(&first), Some(&last)) => Window {
+                columns: [
+                    rows_seen
+                        .iter()
+                        .map(|&y| row_spans[y][0])
+                        .min()
+                        .unwrap_or(0),
+                    rows_seen
+                        .iter()
+                        .map(|&y| row_spans[y][1])
+                        .max()
+                        .unwrap_or(0),
+                ],
+                rows: [first, last + 1],
+            },
+            _ => Window {
+                columns: [0, 0],
+                rows: [0, 0],
+            },
+        };
         let edge_distance_px = edge_distance(valid, width, height);
         let n = width * height;
         let m = samples.len();
@@ -244,6 +269,7 @@ impl Pgm {
             samples,
             sample_spans,
             row_spans,
+            window,
             edge_distance_px,
             kernels: Kernels::default(),
             filters: None,
@@ -478,12 +504,13 @@ impl Pgm {
     /// at their transposed index.
     fn recursive_g_j(&mut self, f: &Filters, with_j: bool) {
         let (w, h) = (self.width, self.height);
+        let (win, win_t) = (self.window, self.window.transposed());
         let image = self.brightness.image();
         let sc = &mut self.scratch;
-        recursive::columns(image, &mut self.h_g, w, h, &f.g, Mode::Write, sc);
-        recursive::transpose(&self.h_g, &mut self.out, w, h);
+        recursive::columns(image, &mut self.h_g, w, win, &f.g, Mode::Write, sc);
+        recursive::transpose(&self.h_g, &mut self.out, w, h, win);
         // G = g_rows ⊛ h_g, computed down the columns of the transposed plane.
-        recursive::columns(&self.out, &mut self.plane, h, w, &f.g, Mode::Write, sc);
+        recursive::columns(&self.out, &mut self.plane, h, win_t, &f.g, Mode::Write, sc);
         for (v, &t) in self.values.iter_mut().zip(&self.transposed) {
             *v = self.plane[t as usize];
         }
@@ -491,10 +518,18 @@ impl Pgm {
             return;
         }
         // J_λ λ³ = (k² g)_rows ⊛ h_g + g_rows ⊛ h_k2g.
-        recursive::columns(image, &mut self.h_k2g, w, h, &f.k2g, Mode::Write, sc);
-        recursive::transpose(&self.h_k2g, &mut self.out2, w, h);
-        recursive::columns(&self.out, &mut self.plane, h, w, &f.k2g, Mode::Write, sc);
-        recursive::columns(&self.out2, &mut self.plane, h, w, &f.g, Mode::Add, sc);
+        recursive::columns(image, &mut self.h_k2g, w, win, &f.k2g, Mode::Write, sc);
+        recursive::transpose(&self.h_k2g, &mut self.out2, w, h, win);
+        recursive::columns(
+            &self.out,
+            &mut self.plane,
+            h,
+            win_t,
+            &f.k2g,
+            Mode::Write,
+            sc,
+        );
+        recursive::columns(&self.out2, &mut self.plane, h, win_t, &f.g, Mode::Add, sc);
         let inv_l3 = 1.0 / (f.lambda * f.lambda * f.lambda);
         for (j, &t) in self.j_lambda.iter_mut().zip(&self.transposed) {
             *j = self.plane[t as usize] * inv_l3;
@@ -508,20 +543,15 @@ impl Pgm {
         let n = w * h;
         self.lanes.resize(n, [0.0; 6]);
         self.lanes_t.resize(n, [0.0; 6]);
+        let win = self.window;
         let sc = &mut self.scratch;
         let li = self.brightness.pixel_interaction().as_flattened();
-        recursive::columns(
-            li,
-            self.lanes.as_flattened_mut(),
-            6 * w,
-            h,
-            &f.g,
-            Mode::Write,
-            sc,
-        );
-        recursive::transpose(&self.lanes, &mut self.lanes_t, w, h);
+        let lanes = self.lanes.as_flattened_mut();
+        recursive::columns(li, lanes, 6 * w, win.interleaved(6), &f.g, Mode::Write, sc);
+        recursive::transpose(&self.lanes, &mut self.lanes_t, w, h, win);
         let (src, dst) = (self.lanes_t.as_flattened(), self.lanes.as_flattened_mut());
-        recursive::columns(src, dst, 6 * h, w, &f.g, Mode::Write, sc);
+        let win_t = win.transposed().interleaved(6);
+        recursive::columns(src, dst, 6 * h, win_t, &f.g, Mode::Write, sc);
         for (l, &t) in self.interaction.iter_mut().zip(&self.transposed) {
             *l = self.lanes[t as usize];
         }
@@ -533,12 +563,13 @@ impl Pgm {
     /// `∂G/∂u = dg_rows ⊛ h_g`, `∂G/∂v = g_rows ⊛ (dg_cols ⊛ I)`.
     fn recursive_gradient(&mut self, f: &Filters) {
         let (w, h) = (self.width, self.height);
+        let (win, win_t) = (self.window, self.window.transposed());
         let sc = &mut self.scratch;
-        recursive::columns(&self.out, &mut self.plane, h, w, &f.dg, Mode::Write, sc);
+        recursive::columns(&self.out, &mut self.plane, h, win_t, &f.dg, Mode::Write, sc);
         let image = self.brightness.image();
-        recursive::columns(image, &mut self.h_dg, w, h, &f.dg, Mode::Write, sc);
-        recursive::transpose(&self.h_dg, &mut self.out2, w, h);
-        recursive::columns(&self.out2, &mut self.h_k2g, h, w, &f.g, Mode::Write, sc);
+        recursive::columns(image, &mut self.h_dg, w, win, &f.dg, Mode::Write, sc);
+        recursive::transpose(&self.h_dg, &mut self.out2, w, h, win);
+        recursive::columns(&self.out2, &mut self.h_k2g, h, win_t, &f.g, Mode::Write, sc);
         for (g, &t) in self.gradient.iter_mut().zip(&self.transposed) {
             *g = [self.plane[t as usize], self.h_k2g[t as usize]];
         }
