@@ -44,11 +44,12 @@
 //!
 //! Speed: pass 1 projects the points of a camera without lens distortion 64 at a time
 //! (a cell's last points by smaller padded blocks, 256 at most into a buffer that stays
-//! in the first level of cache): on AVX-512 where the processor has it (found at run
-//! time, sixteen points per instruction, through `pulp`), else in explicit SSE2 on
-//! x86-64 (through `safe_arch`, four points per instruction), each splat written whole
-//! as four 32-bit words; elsewhere with branch-free arithmetic that the compiler
-//! vectorises; then it scatters their splats. Every kernel gives the same bits.
+//! in the first level of cache): on AVX-512 or AVX2 where the processor has them (found
+//! at run time, sixteen or eight points per instruction, through `pulp`), else in
+//! explicit SSE2 on x86-64 (through `safe_arch`, four points per instruction), each
+//! splat written whole as four 32-bit words; elsewhere with branch-free arithmetic that
+//! the compiler vectorises; then it scatters their splats. Every kernel gives the same
+//! bits.
 //! The points of the cell two ahead in the draw list are prefetched (cells are drawn
 //! front to back, not in memory order). Single-pixel splats (most of them) skip the
 //! square loops, and the single-threaded passes take minima and add samples without a
@@ -70,6 +71,8 @@ use frame::{Frame, PixelStatus};
 
 use crate::{PointCloud, SplatError};
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
@@ -1152,8 +1155,66 @@ impl Project for Avx512 {
     }
 }
 
-/// [`project_and_depth`] on the widest instruction set found at run time (the
-/// instruction set is looked up once per call, a batch of cells).
+/// Eight points per instruction where the processor has AVX2 but not AVX-512
+/// ([`avx2::project_splats`]).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx2(pulp::x86::V3);
+
+#[cfg(target_arch = "x86_64")]
+impl Project for Avx2 {
+    #[inline(always)]
+    fn lanes<const N: usize>(
+        self,
+        points: &[[f32; 4]; N],
+        footprint: f32,
+        view: &View,
+        out: &mut [Splat; N],
+    ) {
+        const { assert!(N.is_multiple_of(8)) };
+        avx2::project_splats(self.0, points, footprint, view, out);
+    }
+
+    #[inline(always)]
+    fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]) {
+        by_blocks::<8>(self, points, footprint, view, out);
+    }
+}
+
+/// [`project_and_depth`] with a projector, to run compiled for its instruction set
+/// (a struct, not a closure: pulp's `with_simd` is compiled for the instruction set,
+/// and only an `#[inline(always)]` method is sure to be inlined into it).
+struct PassOne<'a, P> {
+    points: &'a [[f32; 4]],
+    cells: &'a [DrawCell],
+    view: &'a View,
+    camera: &'a Camera,
+    depth: &'a [AtomicU32],
+    splats: &'a mut [Splat],
+    atomic: bool,
+    projector: P,
+}
+
+impl<P: Project> pulp::WithSimd for PassOne<'_, P> {
+    type Output = usize;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> usize {
+        project_and_depth(
+            self.points,
+            self.cells,
+            self.view,
+            self.camera,
+            self.depth,
+            self.splats,
+            self.atomic,
+            self.projector,
+        )
+    }
+}
+
+/// [`project_and_depth`] on the widest instruction set found at run time (looked up
+/// once per call, a batch of cells): AVX-512, else AVX2, else the baseline.
 fn widest_pass_one(
     points: &[[f32; 4]],
     cells: &[DrawCell],
@@ -1164,46 +1225,39 @@ fn widest_pass_one(
     atomic: bool,
 ) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = pulp::x86::V4::try_new() {
-        // A struct, not a closure: pulp's `with_simd` is compiled for the instruction
-        // set, and only an `#[inline(always)]` method is sure to be inlined into it.
-        struct PassOne<'a> {
-            points: &'a [[f32; 4]],
-            cells: &'a [DrawCell],
-            view: &'a View,
-            camera: &'a Camera,
-            depth: &'a [AtomicU32],
-            splats: &'a mut [Splat],
-            atomic: bool,
-            simd: pulp::x86::V4,
+    {
+        if let Some(simd) = pulp::x86::V4::try_new() {
+            let projector = Avx512(simd);
+            return pulp::Simd::vectorize(
+                simd,
+                PassOne {
+                    points,
+                    cells,
+                    view,
+                    camera,
+                    depth,
+                    splats,
+                    atomic,
+                    projector,
+                },
+            );
         }
-        impl pulp::WithSimd for PassOne<'_> {
-            type Output = usize;
-            #[inline(always)]
-            fn with_simd<S: pulp::Simd>(self, _: S) -> usize {
-                project_and_depth(
-                    self.points,
-                    self.cells,
-                    self.view,
-                    self.camera,
-                    self.depth,
-                    self.splats,
-                    self.atomic,
-                    Avx512(self.simd),
-                )
-            }
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            let projector = Avx2(simd);
+            return pulp::Simd::vectorize(
+                simd,
+                PassOne {
+                    points,
+                    cells,
+                    view,
+                    camera,
+                    depth,
+                    splats,
+                    atomic,
+                    projector,
+                },
+            );
         }
-        let pass = PassOne {
-            points,
-            cells,
-            view,
-            camera,
-            depth,
-            splats,
-            atomic,
-            simd,
-        };
-        return pulp::Simd::vectorize(simd, pass);
     }
     project_and_depth(points, cells, view, camera, depth, splats, atomic, Baseline)
 }
@@ -1505,7 +1559,8 @@ mod tests {
     /// The splats of `points` by every projector this processor runs, in pass 1's
     /// own instruction set (its first [`BLOCK`] as a block, the rest, 37 points, as a
     /// cell's last ones), each checked to agree with the baseline projector; returns
-    /// the baseline's. An AVX-512 projector is checked only where the processor has it.
+    /// the baseline's. The AVX-512 and AVX2 projectors are checked where the processor
+    /// has them.
     fn with_every_projector(points: &[[f32; 4]; BLOCK], footprint: f32, view: &View) -> Vec<Splat> {
         struct Run<'a, P> {
             points: &'a [[f32; 4]; BLOCK],
@@ -1559,6 +1614,22 @@ mod tests {
             assert!(
                 same(&wide, &baseline),
                 "AVX-512 and baseline projectors differ"
+            );
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            let wide = pulp::Simd::vectorize(
+                simd,
+                Run {
+                    points,
+                    footprint,
+                    view,
+                    projector: Avx2(simd),
+                },
+            );
+            assert!(
+                same(&wide, &baseline),
+                "AVX2 and baseline projectors differ"
             );
         }
         baseline

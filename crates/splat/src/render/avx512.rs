@@ -100,6 +100,10 @@ impl Ops {
         self.0.avx512f._mm512_or_si512(a, b)
     }
     #[inline(always)]
+    fn shl16(self, a: __m512i) -> __m512i {
+        self.0.avx512f._mm512_slli_epi32::<16>(a)
+    }
+    #[inline(always)]
     fn bits(self, a: __m512) -> __m512i {
         self.0.avx512f._mm512_castps_si512(a)
     }
@@ -225,8 +229,7 @@ pub(super) fn project_splats(
     let (out, _) = out.as_chunks_mut::<16>();
     for (points, out) in points.iter().zip(out) {
         // Sixteen points [x, y, z, grey] transposed into x, y, z and grey.
-        let quads: [[[f32; 4]; 4]; 4] = pulp::cast(*points);
-        let [a, b, c, d] = quads.map(pulp::cast::<_, __m512>);
+        let [a, b, c, d]: [__m512; 4] = pulp::cast(*points);
         let (ab_xy, ab_zg) = (o.permute(a, X_Y, b), o.permute(a, Z_G, b));
         let (cd_xy, cd_zg) = (o.permute(c, X_Y, d), o.permute(c, Z_G, d));
         let x = o.permute(ab_xy, LOW_EIGHTS, cd_xy);
@@ -278,11 +281,10 @@ pub(super) fn project_splats(
             65535.0,
         ));
         // The splats' words, one vector per word, transposed to four words per point.
-        let shl16 = |a: __m512i| simd.avx512f._mm512_slli_epi32::<16>(a);
-        let w0 = o.or_i(o.and_i(pu, low_half), shl16(pv));
+        let w0 = o.or_i(o.and_i(pu, low_half), o.shl16(pv));
         let w1 = o.or_i(
             o.and_i(o.select(seen, n, not_drawn), low_half),
-            shl16(intensity),
+            o.shl16(intensity),
         );
         let w2 = o.bits(rho);
         let w3 = o.bits(o.div(rho, band_factor));
