@@ -232,28 +232,18 @@ impl Pgm {
                 },
             )
             .collect();
-        let rows_seen: Vec<usize> = (0..height).filter(|&y| row_spans[y][1] > 0).collect();
-        let window = match (rows_seen.first(), rows_seen.last()) {
-            (Some(&first), Some(&last)) => Window {
-                columns: [
-                    rows_seen
-                        .iter()
-                        .map(|&y| row_spans[y][0])
-                        .min()
-                        .unwrap_or(0),
-                    rows_seen
-                        .iter()
-                        .map(|&y| row_spans[y][1])
-                        .max()
-                        .unwrap_or(0),
-                ],
-                rows: [first, last + 1],
-            },
-            _ => Window {
-                columns: [0, 0],
-                rows: [0, 0],
-            },
+        // The bounding box of the rows' spans (empty if no pixel is valid).
+        let mut window = Window {
+            columns: [width, 0],
+            rows: [height, 0],
         };
+        for (y, &[first, end]) in row_spans.iter().enumerate().filter(|(_, s)| s[1] > 0) {
+            window.columns = [window.columns[0].min(first), window.columns[1].max(end)];
+            window.rows = [window.rows[0].min(y), y + 1];
+        }
+        if window.rows[0] >= window.rows[1] {
+            window = Window::whole(0, 0);
+        }
         let edge_distance_px = edge_distance(valid, width, height);
         let n = width * height;
         let m = samples.len();

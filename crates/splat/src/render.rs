@@ -1183,10 +1183,8 @@ impl Project for Avx2 {
     }
 }
 
-/// [`project_and_depth`] with a projector, to run compiled for its instruction set
-/// (a struct, not a closure: pulp's `with_simd` is compiled for the instruction set,
-/// and only an `#[inline(always)]` method is sure to be inlined into it).
-struct PassOne<'a, P> {
+/// The arguments of [`project_and_depth`] but the projector.
+struct PassOneArgs<'a> {
     points: &'a [[f32; 4]],
     cells: &'a [DrawCell],
     view: &'a View,
@@ -1194,24 +1192,29 @@ struct PassOne<'a, P> {
     depth: &'a [AtomicU32],
     splats: &'a mut [Splat],
     atomic: bool,
-    projector: P,
 }
+
+impl PassOneArgs<'_> {
+    #[inline(always)]
+    fn run(self, projector: impl Project) -> usize {
+        let a = self;
+        project_and_depth(
+            a.points, a.cells, a.view, a.camera, a.depth, a.splats, a.atomic, projector,
+        )
+    }
+}
+
+/// [`project_and_depth`] with a projector, to run compiled for its instruction set
+/// (a struct, not a closure: pulp's `with_simd` is compiled for the instruction set,
+/// and only an `#[inline(always)]` method is sure to be inlined into it).
+struct PassOne<'a, P>(PassOneArgs<'a>, P);
 
 impl<P: Project> pulp::WithSimd for PassOne<'_, P> {
     type Output = usize;
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) -> usize {
-        project_and_depth(
-            self.points,
-            self.cells,
-            self.view,
-            self.camera,
-            self.depth,
-            self.splats,
-            self.atomic,
-            self.projector,
-        )
+        self.0.run(self.1)
     }
 }
 
@@ -1226,48 +1229,33 @@ fn widest_pass_one(
     splats: &mut [Splat],
     atomic: bool,
 ) -> usize {
+    let args = PassOneArgs {
+        points,
+        cells,
+        view,
+        camera,
+        depth,
+        splats,
+        atomic,
+    };
     #[cfg(target_arch = "x86_64")]
     {
+        // `Simd::vectorize`, not the inherent one (which takes a closure).
         if let Some(simd) = pulp::x86::V4::try_new() {
-            let projector = Avx512(simd);
-            return pulp::Simd::vectorize(
-                simd,
-                PassOne {
-                    points,
-                    cells,
-                    view,
-                    camera,
-                    depth,
-                    splats,
-                    atomic,
-                    projector,
-                },
-            );
+            return pulp::Simd::vectorize(simd, PassOne(args, Avx512(simd)));
         }
         if let Some(simd) = pulp::x86::V3::try_new() {
-            let projector = Avx2(simd);
-            return pulp::Simd::vectorize(
-                simd,
-                PassOne {
-                    points,
-                    cells,
-                    view,
-                    camera,
-                    depth,
-                    splats,
-                    atomic,
-                    projector,
-                },
-            );
+            return pulp::Simd::vectorize(simd, PassOne(args, Avx2(simd)));
         }
     }
-    project_and_depth(points, cells, view, camera, depth, splats, atomic, Baseline)
+    args.run(Baseline)
 }
 
 /// [`project_point`] of `N` points of a camera without lens distortion, with the
 /// same operations in the same order (so bit for bit the same splats), several points
-/// per instruction: explicit SSE2 on x86-64 ([`sse2::project_lanes`]), elsewhere
-/// branch-free code that the compiler vectorises ([`project_lanes_portable`]). Unseen
+/// per instruction: explicit SSE2 on x86-64 ([`sse2::project_splats`]), elsewhere
+/// branch-free code that the compiler vectorises ([`project_lanes_portable`]); the
+/// [`Baseline`] projector (wider ones: [`Avx512`], [`Avx2`]). Unseen
 /// points get the width [`NOT_DRAWN`] (their other fields are then meaningless).
 #[inline(always)]
 fn project_block<const N: usize>(
@@ -1603,36 +1591,43 @@ mod tests {
             "a cell's last points differ from the same points in a block"
         );
         #[cfg(target_arch = "x86_64")]
-        if let Some(simd) = pulp::x86::V4::try_new() {
-            let wide = pulp::Simd::vectorize(
-                simd,
-                Run {
-                    points,
-                    footprint,
-                    view,
-                    projector: Avx512(simd),
-                },
-            );
-            assert!(
-                same(&wide, &baseline),
-                "AVX-512 and baseline projectors differ"
-            );
-        }
-        #[cfg(target_arch = "x86_64")]
-        if let Some(simd) = pulp::x86::V3::try_new() {
-            let wide = pulp::Simd::vectorize(
-                simd,
-                Run {
-                    points,
-                    footprint,
-                    view,
-                    projector: Avx2(simd),
-                },
-            );
-            assert!(
-                same(&wide, &baseline),
-                "AVX2 and baseline projectors differ"
-            );
+        {
+            let check = |wide: Vec<Splat>, name: &str| {
+                assert!(
+                    same(&wide, &baseline),
+                    "{name} and baseline projectors differ"
+                );
+            };
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                let projector = Avx512(simd);
+                check(
+                    pulp::Simd::vectorize(
+                        simd,
+                        Run {
+                            points,
+                            footprint,
+                            view,
+                            projector,
+                        },
+                    ),
+                    "AVX-512",
+                );
+            }
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                let projector = Avx2(simd);
+                check(
+                    pulp::Simd::vectorize(
+                        simd,
+                        Run {
+                            points,
+                            footprint,
+                            view,
+                            projector,
+                        },
+                    ),
+                    "AVX2",
+                );
+            }
         }
         baseline
     }
