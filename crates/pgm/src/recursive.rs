@@ -417,6 +417,56 @@ pub fn columns(
         window,
         filter,
         mode,
+        step: 1,
+        scratch,
+    });
+}
+
+/// The rows of a window of rows `[r0, r1)` that [`columns_every`] writes with `step`:
+/// `r0, r0 + step, …` and the last, `r1 − 1`; their number.
+pub fn kept_rows([r0, r1]: [usize; 2], step: usize) -> usize {
+    let step = step.max(1);
+    match r1.checked_sub(r0 + 1) {
+        None => 0,
+        Some(span) => span / step + 1 + usize::from(!span.is_multiple_of(step)),
+    }
+}
+
+/// [`columns`] (written) that keeps only the rows `r0, r0 + step, …` and the last
+/// `r1 − 1` of the window's rows `[r0, r1)`, packed from the first row of `dst`
+/// (the `k`-th kept row in row `k`; [`kept_rows`] of them), in the window's columns.
+/// Every row is still filtered; only the final sum and the store are skipped. For
+/// planes that the filter smooths over many rows, interpolated between kept rows
+/// afterwards.
+///
+/// Panics if the window does not fit in `src`, or its kept rows in `dst`.
+pub fn columns_every(
+    src: &[f32],
+    dst: &mut [f32],
+    width: usize,
+    window: Window,
+    filter: &Recursive,
+    step: usize,
+    scratch: &mut Scratch,
+) {
+    let ([c0, c1], [r0, r1]) = (window.columns, window.rows);
+    let step = step.max(1);
+    assert!(
+        c0 <= c1
+            && c1 <= width
+            && r0 <= r1
+            && r1 * width <= src.len()
+            && kept_rows([r0, r1], step) * width <= dst.len(),
+        "window {window:?} outside a plane of {width} columns"
+    );
+    crate::simd::on_widest(ColumnsOp {
+        src,
+        dst,
+        width,
+        window,
+        filter,
+        mode: Mode::Write,
+        step,
         scratch,
     });
 }
@@ -429,6 +479,8 @@ struct ColumnsOp<'a> {
     window: Window,
     filter: &'a Recursive,
     mode: Mode,
+    /// 1: every row in place; else the kept rows of [`columns_every`], packed.
+    step: usize,
     scratch: &'a mut Scratch,
 }
 
@@ -436,11 +488,14 @@ impl crate::simd::Kernel for ColumnsOp<'_> {
     #[inline(always)]
     fn run(self) {
         let o = self;
-        columns_inline(o.src, o.dst, o.width, o.window, o.filter, o.mode, o.scratch);
+        columns_inline(
+            o.src, o.dst, o.width, o.window, o.filter, o.mode, o.step, o.scratch,
+        );
     }
 }
 
 /// [`columns`], inlined into each instruction set's copy.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn columns_inline(
     src: &[f32],
@@ -449,6 +504,7 @@ fn columns_inline(
     window: Window,
     filter: &Recursive,
     mode: Mode,
+    step: usize,
     scratch: &mut Scratch,
 ) {
     let ([c0, c1], rows) = (window.columns, window.rows);
@@ -467,8 +523,18 @@ fn columns_inline(
         });
         sweep(src, width, rows, [x0, n], c, false, scratch, |y, a| {
             let yc = y - rows[0];
-            let at = y * width + x0;
-            let rows = dst[at..at + n]
+            // The destination row: the same, or the kept row's packed index.
+            let out = if step == 1 {
+                y
+            } else if yc.is_multiple_of(step) {
+                yc / step
+            } else if y + 1 == rows[1] {
+                yc / step + 1
+            } else {
+                return;
+            };
+            let (at, to) = (y * width + x0, out * width + x0);
+            let rows = dst[to..to + n]
                 .iter_mut()
                 .zip(&src[at..at + n])
                 .zip(&causal[yc * n..(yc + 1) * n])
@@ -627,6 +693,7 @@ mod tests {
                     window,
                     filter: &filter,
                     mode,
+                    step: 1,
                     scratch: &mut Scratch::default(),
                 });
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

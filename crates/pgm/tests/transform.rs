@@ -168,7 +168,11 @@ fn recursive_filters_match_the_exact_correlation() {
         ..PgmOptions::default()
     };
     let mut exact = Pgm::new(&camera, exact_options).unwrap();
-    let mut fast = Pgm::new(&camera, PgmOptions::default()).unwrap();
+    let every_row = PgmOptions {
+        interaction_row_step_lambdas: None,
+        ..PgmOptions::default()
+    };
+    let mut fast = Pgm::new(&camera, every_row).unwrap();
     let relative = |a: &[f32], b: &[f32]| {
         let peak = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let diff = a
@@ -229,6 +233,13 @@ fn bad_lambda_and_options_are_errors() {
             )
             .is_err()
         );
+    }
+    for bad in [0.0f32, -0.2, f32::NAN, f32::INFINITY] {
+        let options = PgmOptions {
+            interaction_row_step_lambdas: Some(bad),
+            ..PgmOptions::default()
+        };
+        assert!(Pgm::new(&camera, options).is_err());
     }
     assert!(
         Pgm::new(
@@ -362,5 +373,47 @@ fn jacobian_names_round_trip() {
         "paper-margininf",
     ] {
         assert!(bad.parse::<PgmJacobian>().is_err(), "{bad}");
+    }
+}
+
+/// `L_G` with its vertical pass kept every ⌊q λ⌋ rows and interpolated
+/// ([`PgmOptions::interaction_row_step_lambdas`]) against every row, on a street-like
+/// frame at both resolutions: `G` and `J_λ` are the same bits, and each column of
+/// `L_G` is within a bound of its peak.
+#[test]
+fn interpolated_interaction_rows_stay_close() {
+    for name in ["fixtures/omni-320x240.toml", "fixtures/omni-640x480.toml"] {
+        let camera = Camera::load_toml(crate::common::root().join(name)).unwrap();
+        let frame = crate::common::street_like(&camera);
+        let every_row = PgmOptions {
+            interaction_row_step_lambdas: None,
+            ..PgmOptions::default()
+        };
+        let mut exact = Pgm::new(&camera, every_row).unwrap();
+        let mut fast = Pgm::new(&camera, PgmOptions::default()).unwrap();
+        for lambda in [3.0f32, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0, 40.0] {
+            exact.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
+            fast.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(fast.values()), bits(exact.values()));
+            assert_eq!(bits(fast.j_lambda()), bits(exact.j_lambda()));
+            let mut worst = 0.0f32;
+            for c in 0..6 {
+                let peak = exact.interaction().iter().fold(0.0f32, |m, r| m.max(r[c].abs()));
+                let diff = fast
+                    .interaction()
+                    .iter()
+                    .zip(exact.interaction())
+                    .fold(0.0f32, |m, (a, b)| m.max((a[c] - b[c]).abs()));
+                worst = worst.max(diff / peak);
+            }
+            // Measured: 0 below λ = 10 (one row in 1), ≤ 6.6e-3 up to λ = 15,
+            // ≤ 1.01e-2 at λ = 40 (one row in 8).
+            let bound = if lambda <= 15.0 { 1e-2 } else { 1.5e-2 };
+            assert!(worst < bound, "{name} λ {lambda}: L_G off by {worst:.2e} of its peak");
+            if lambda < 10.0 {
+                assert_eq!(worst, 0.0, "λ {lambda}: every row kept, the same L_G");
+            }
+        }
     }
 }

@@ -136,6 +136,11 @@ pub struct VvsConfig {
     /// [`pgm::PgmOptions::recursive_from_lambda`]); below it, and always if it is
     /// infinite (`inf` in TOML), the exact kernels truncated at 4λ. Default 3.
     pub pgm_recursive_from_lambda: f32,
+    /// The PGM's Convolved Jacobian on the recursive path keeps one row in
+    /// `max(1, ⌊q λ⌋)` of its vertical pass and interpolates between them (`q` this
+    /// value; `G` and `J_λ` stay exact; see
+    /// [`pgm::PgmOptions::interaction_row_step_lambdas`]); 0: every row. Default 0.2.
+    pub pgm_interaction_row_step_lambdas: f32,
     /// Renderer level of detail (pixels between drawn points), `None` for every point.
     pub lod_spacing_px: Option<f32>,
     /// Beyond the paper: the settings of [`Method::Global`].
@@ -175,6 +180,7 @@ impl Default for VvsConfig {
             normalize: false,
             pgm_stride: 1,
             pgm_recursive_from_lambda: 3.0,
+            pgm_interaction_row_step_lambdas: 0.2,
             lod_spacing_px: splat::RenderOptions::default().lod_spacing_px,
             global: crate::GlobalConfig::default(),
             vignetting: false,
@@ -189,6 +195,12 @@ impl VvsConfig {
     pub(crate) fn pgm_recursive(&self) -> Option<f32> {
         let from = self.pgm_recursive_from_lambda;
         from.is_finite().then_some(from)
+    }
+
+    /// [`VvsConfig::pgm_interaction_row_step_lambdas`] as the PGM's option.
+    pub(crate) fn pgm_interaction_row_step(&self) -> Option<f32> {
+        let q = self.pgm_interaction_row_step_lambdas;
+        (q > 0.0).then_some(q)
     }
 
     /// Check every field against its documented range.
@@ -283,6 +295,13 @@ impl VvsConfig {
             return bad(
                 "pgm_recursive_from_lambda",
                 format!("must be > 0, got {}", self.pgm_recursive_from_lambda),
+            );
+        }
+        let q = self.pgm_interaction_row_step_lambdas;
+        if !(q >= 0.0 && q.is_finite()) {
+            return bad(
+                "pgm_interaction_row_step_lambdas",
+                format!("must be >= 0 and finite, got {q}"),
             );
         }
         Ok(())

@@ -81,6 +81,7 @@ impl Level {
                     normalize: config.normalize,
                     parallel: config.parallel,
                     recursive_from_lambda: config.pgm_recursive(),
+                    interaction_row_step_lambdas: config.pgm_interaction_row_step(),
                     ..PgmOptions::default()
                 },
             )?,
@@ -95,6 +96,7 @@ impl Level {
                     normalize: false,
                     parallel: config.parallel,
                     recursive_from_lambda: config.pgm_recursive(),
+                    interaction_row_step_lambdas: config.pgm_interaction_row_step(),
                     ..PgmOptions::default()
                 },
             )?,

@@ -36,6 +36,14 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
             "pgm_recursive_from_lambda = nan",
             "pgm_recursive_from_lambda",
         ),
+        (
+            "pgm_interaction_row_step_lambdas = -0.1",
+            "pgm_interaction_row_step_lambdas",
+        ),
+        (
+            "pgm_interaction_row_step_lambdas = inf",
+            "pgm_interaction_row_step_lambdas",
+        ),
         ("pyramid_levels = 0", "pyramid_levels"),
         ("pyramid_levels = 6", "pyramid_levels"),
         (
