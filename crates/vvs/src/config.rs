@@ -137,7 +137,7 @@ pub struct VvsConfig {
     /// infinite (`inf` in TOML), the exact kernels truncated at 4λ. Default 3.
     pub pgm_recursive_from_lambda: f32,
     /// The PGM's Convolved Jacobian on the recursive path keeps one row in
-    /// `max(1, ⌊q λ⌋)` of its vertical pass and interpolates between them (`q` this
+    /// `max(1, ⌊q λ⌋)` of its vertical pass and interpolates cubics between them (`q` this
     /// value; `G` and `J_λ` stay exact; see
     /// [`pgm::PgmOptions::interaction_row_step_lambdas`]); 0: every row. Default 0.2.
     pub pgm_interaction_row_step_lambdas: f32,
