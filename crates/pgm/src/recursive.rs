@@ -405,21 +405,7 @@ pub fn columns(
     mode: Mode,
     scratch: &mut Scratch,
 ) {
-    let ([c0, c1], [r0, r1]) = (window.columns, window.rows);
-    assert!(
-        c0 <= c1 && c1 <= width && r0 <= r1 && r1 * width <= src.len().min(dst.len()),
-        "window {window:?} outside a plane of {width} columns"
-    );
-    crate::simd::on_widest(ColumnsOp {
-        src,
-        dst,
-        width,
-        window,
-        filter,
-        mode,
-        step: 1,
-        scratch,
-    });
+    run_columns(src, dst, width, window, filter, mode, 1, scratch);
 }
 
 /// The rows of a window of rows `[r0, r1)` that [`columns_every`] writes with `step`:
@@ -449,14 +435,34 @@ pub fn columns_every(
     step: usize,
     scratch: &mut Scratch,
 ) {
-    let ([c0, c1], [r0, r1]) = (window.columns, window.rows);
     let step = step.max(1);
+    run_columns(src, dst, width, window, filter, Mode::Write, step, scratch);
+}
+
+/// [`columns`] or [`columns_every`] on the widest instruction set, after checking that
+/// the window fits in the source, and the rows it writes in the destination.
+#[allow(clippy::too_many_arguments)]
+fn run_columns(
+    src: &[f32],
+    dst: &mut [f32],
+    width: usize,
+    window: Window,
+    filter: &Recursive,
+    mode: Mode,
+    step: usize,
+    scratch: &mut Scratch,
+) {
+    let ([c0, c1], [r0, r1]) = (window.columns, window.rows);
+    let dst_rows = match step {
+        1 => r1,
+        step => kept_rows([r0, r1], step),
+    };
     assert!(
         c0 <= c1
             && c1 <= width
             && r0 <= r1
             && r1 * width <= src.len()
-            && kept_rows([r0, r1], step) * width <= dst.len(),
+            && dst_rows * width <= dst.len(),
         "window {window:?} outside a plane of {width} columns"
     );
     crate::simd::on_widest(ColumnsOp {
@@ -465,7 +471,7 @@ pub fn columns_every(
         width,
         window,
         filter,
-        mode: Mode::Write,
+        mode,
         step,
         scratch,
     });
@@ -487,26 +493,23 @@ struct ColumnsOp<'a> {
 impl crate::simd::Kernel for ColumnsOp<'_> {
     #[inline(always)]
     fn run(self) {
-        let o = self;
-        columns_inline(
-            o.src, o.dst, o.width, o.window, o.filter, o.mode, o.step, o.scratch,
-        );
+        columns_inline(self);
     }
 }
 
-/// [`columns`], inlined into each instruction set's copy.
-#[allow(clippy::too_many_arguments)]
+/// [`columns`] and [`columns_every`], inlined into each instruction set's copy.
 #[inline(always)]
-fn columns_inline(
-    src: &[f32],
-    dst: &mut [f32],
-    width: usize,
-    window: Window,
-    filter: &Recursive,
-    mode: Mode,
-    step: usize,
-    scratch: &mut Scratch,
-) {
+fn columns_inline(op: ColumnsOp<'_>) {
+    let ColumnsOp {
+        src,
+        dst,
+        width,
+        window,
+        filter,
+        mode,
+        step,
+        scratch,
+    } = op;
     let ([c0, c1], rows) = (window.columns, window.rows);
     let height = rows[1] - rows[0];
     let n = STRIPE.min(c1 - c0);
