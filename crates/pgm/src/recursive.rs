@@ -327,7 +327,7 @@ impl Coefficients {
 /// the sum of the sections' outputs at every row, row after row.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn sweep(
+fn sweep<E: Emit>(
     src: &[f32],
     width: usize,
     [r0, r1]: [usize; 2],
@@ -335,7 +335,7 @@ fn sweep(
     c: Coefficients,
     down: bool,
     scratch: &mut Scratch,
-    mut emit: impl FnMut(usize, &[f32]),
+    emit: &mut E,
 ) {
     // Two rows of past outputs per section: `older` (y[t − 2], receives y[t]) and
     // `newer` (y[t − 1]), swapped every row; a row of zeros before the first; the
@@ -378,7 +378,7 @@ fn sweep(
             o2[j] = v2;
             sum[j] = v0 + v1 + v2;
         }
-        emit(row(t), sum);
+        emit.row(row(t), sum);
     }
 }
 
@@ -520,43 +520,112 @@ fn columns_inline(op: ColumnsOp<'_>) {
     let c = Coefficients::of(filter);
     for x0 in (c0..c1).step_by(STRIPE) {
         let n = STRIPE.min(c1 - x0);
-        sweep(src, width, rows, [x0, n], c, true, scratch, |y, sum| {
-            let y = y - rows[0];
-            causal[y * n..(y + 1) * n].copy_from_slice(sum);
-        });
-        sweep(src, width, rows, [x0, n], c, false, scratch, |y, a| {
-            let yc = y - rows[0];
-            // The destination row: the same, or the kept row's packed index.
-            let out = if step == 1 {
-                y
-            } else if yc.is_multiple_of(step) {
-                yc / step
-            } else if y + 1 == rows[1] {
-                yc / step + 1
-            } else {
-                return;
-            };
-            let (at, to) = (y * width + x0, out * width + x0);
-            let rows = dst[to..to + n]
-                .iter_mut()
-                .zip(&src[at..at + n])
-                .zip(&causal[yc * n..(yc + 1) * n])
-                .zip(a);
-            match mode {
-                Mode::Write => {
-                    for (((o, &s), &c), &a) in rows {
-                        *o = center * s + a + sigma * c;
-                    }
-                }
-                Mode::Add => {
-                    for (((o, &s), &c), &a) in rows {
-                        *o += center * s + a + sigma * c;
-                    }
-                }
-            }
-        });
+        let mut causal_rows = Causal {
+            causal: &mut causal,
+            first_row: rows[0],
+            n,
+        };
+        sweep(
+            src,
+            width,
+            rows,
+            [x0, n],
+            c,
+            true,
+            scratch,
+            &mut causal_rows,
+        );
+        let mut finish = Finish {
+            src,
+            dst: &mut *dst,
+            width,
+            rows,
+            stripe: [x0, n],
+            causal: &causal,
+            center,
+            sigma,
+            mode,
+            step,
+        };
+        sweep(src, width, rows, [x0, n], c, false, scratch, &mut finish);
     }
     scratch.causal = causal;
+}
+
+/// What a [`sweep`] does with the sums of each row: a struct with an
+/// `#[inline(always)]` method, not a closure (a closure that the compiler does not
+/// inline is compiled apart, without the instruction set of its caller).
+trait Emit {
+    /// The sections' sums at row `y`.
+    fn row(&mut self, y: usize, sums: &[f32]);
+}
+
+/// The causal sweep's [`Emit`]: keep every row's sums.
+struct Causal<'a> {
+    causal: &'a mut [f32],
+    first_row: usize,
+    n: usize,
+}
+
+impl Emit for Causal<'_> {
+    #[inline(always)]
+    fn row(&mut self, y: usize, sums: &[f32]) {
+        let (y, n) = (y - self.first_row, self.n);
+        self.causal[y * n..(y + 1) * n].copy_from_slice(sums);
+    }
+}
+
+/// The anticausal sweep's [`Emit`]: the output `K(0) src + anticausal + σ causal` of
+/// the stripe `[x0, x0 + n)` at each row written (every row in place if `step` is 1,
+/// else the kept rows packed: [`columns_every`]).
+struct Finish<'a> {
+    src: &'a [f32],
+    dst: &'a mut [f32],
+    width: usize,
+    rows: [usize; 2],
+    stripe: [usize; 2],
+    causal: &'a [f32],
+    center: f32,
+    sigma: f32,
+    mode: Mode,
+    step: usize,
+}
+
+impl Emit for Finish<'_> {
+    #[inline(always)]
+    fn row(&mut self, y: usize, a: &[f32]) {
+        let ([x0, n], step, width) = (self.stripe, self.step, self.width);
+        let (center, sigma) = (self.center, self.sigma);
+        let yc = y - self.rows[0];
+        // The destination row: the same, or the kept row's packed index.
+        let out = if step == 1 {
+            y
+        } else if yc.is_multiple_of(step) {
+            yc / step
+        } else if y + 1 == self.rows[1] {
+            yc / step + 1
+        } else {
+            return;
+        };
+        let (at, to) = (y * width + x0, out * width + x0);
+        let rows = self.dst[to..to + n]
+            .iter_mut()
+            .zip(&self.src[at..at + n])
+            .zip(&self.causal[yc * n..(yc + 1) * n])
+            .zip(a);
+        match self.mode {
+            Mode::Write => {
+                for (((o, &s), &c), &a) in rows {
+                    *o = center * s + a + sigma * c;
+                }
+            }
+            Mode::Add => {
+                for (((o, &s), &c), &a) in rows {
+                    *o += center * s + a + sigma * c;
+                }
+            }
+        }
+    }
 }
 
 /// `dst[x · height + y] = src[y · width + x]` for the pixels `(x, y)` of `window`
@@ -701,6 +770,69 @@ mod tests {
                 });
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&fast), bits(&scalar), "{shape:?} {mode:?}");
+            }
+        }
+    }
+
+    /// [`columns_every`] keeps, packed, exactly the rows `r0, r0 + step, …` and the
+    /// last of the pass over every row, on the instruction set detected at run time and
+    /// on the scalar loops alike.
+    #[test]
+    fn kept_rows_are_the_rows_of_the_whole_pass() {
+        let (width, height) = (6 * 53, 41);
+        let src: Vec<f32> = (0..width * height)
+            .map(|k| ((k * 7919) % 1000) as f32 / 1000.0 - 0.3)
+            .collect();
+        let window = Window {
+            columns: [6, width - 12],
+            rows: [2, height - 1],
+        };
+        let filter = Recursive::new(Shape::Gaussian, 12.5);
+        let mut every = vec![0.0f32; width * height];
+        let mut scratch = Scratch::default();
+        columns(
+            &src,
+            &mut every,
+            width,
+            window,
+            &filter,
+            Mode::Write,
+            &mut scratch,
+        );
+        for step in [2, 3, 7, 38, 39] {
+            let kept = kept_rows(window.rows, step);
+            let mut fast = vec![0.0f32; kept * width];
+            let mut scalar = fast.clone();
+            columns_every(&src, &mut fast, width, window, &filter, step, &mut scratch);
+            crate::simd::on_scalar(ColumnsOp {
+                src: &src,
+                dst: &mut scalar,
+                width,
+                window,
+                filter: &filter,
+                mode: Mode::Write,
+                step,
+                scratch: &mut scratch,
+            });
+            let [r0, r1] = window.rows;
+            let mut rows: Vec<usize> = (r0..r1).step_by(step).collect();
+            if rows.last() != Some(&(r1 - 1)) {
+                rows.push(r1 - 1);
+            }
+            assert_eq!(rows.len(), kept, "step {step}");
+            for (k, &y) in rows.iter().enumerate() {
+                let [c0, c1] = window.columns;
+                let want = &every[y * width + c0..y * width + c1];
+                assert_eq!(
+                    &fast[k * width + c0..k * width + c1],
+                    want,
+                    "step {step} row {y}"
+                );
+                assert_eq!(
+                    &scalar[k * width + c0..k * width + c1],
+                    want,
+                    "step {step} row {y}"
+                );
             }
         }
     }

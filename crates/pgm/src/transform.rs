@@ -216,6 +216,23 @@ impl Between {
     }
 }
 
+/// The samples' `L_G` interpolated from the transposed packed plane, a
+/// [`crate::simd::Kernel`] (compiled for the widest instruction set).
+struct Interpolate<'a> {
+    out: &'a mut [[f32; 6]],
+    between: &'a [Between],
+    plane: &'a [[f32; 6]],
+}
+
+impl crate::simd::Kernel for Interpolate<'_> {
+    #[inline(always)]
+    fn run(self) {
+        for (l, between) in self.out.iter_mut().zip(self.between) {
+            *l = between.interpolate(self.plane);
+        }
+    }
+}
+
 /// Per sample (row-major pixel index in an image `width` wide), its cubic between the
 /// rows `[r0, r1)` kept every `step` and the last (`kept` ≥ 4 of them,
 /// [`recursive::kept_rows`]): the kept rows `j − 1 … j + 2` around it, shifted
@@ -653,9 +670,11 @@ impl Pgm {
                 self.interpolation = interpolation(&self.samples, w, win.rows, step, kept);
                 self.interpolation_step = step;
             }
-            for (l, between) in self.interaction.iter_mut().zip(&self.interpolation) {
-                *l = between.interpolate(&self.lanes);
-            }
+            crate::simd::on_widest(Interpolate {
+                out: &mut self.interaction,
+                between: &self.interpolation,
+                plane: &self.lanes,
+            });
         }
         self.weights.fill(1.0);
     }
