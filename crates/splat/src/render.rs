@@ -50,8 +50,8 @@
 //! splat written whole as four 32-bit words; elsewhere with branch-free arithmetic that
 //! the compiler vectorises; then it scatters their splats. Every kernel gives the same
 //! bits.
-//! The points of the cell two ahead in the draw list are prefetched (cells are drawn
-//! front to back, not in memory order). Single-pixel splats (most of them) skip the
+//! The points 512 ahead in the draw list are prefetched, a few cache lines per block
+//! (cells are drawn front to back, not in memory order). Single-pixel splats (most of them) skip the
 //! square loops, and the single-threaded passes take minima and add samples without a
 //! branch (whether a point is nearer is unpredictable). Each point's splat is bit for
 //! bit the one of the scalar reference (tested, both kernels). A splat whose every
