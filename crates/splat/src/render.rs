@@ -273,6 +273,8 @@ pub struct Renderer {
     /// interleaved so that pass 2 touches one cache line per pixel.
     accum: Vec<[AtomicU64; 2]>,
     candidates: Vec<Candidate>,
+    /// The candidates' draw order: range of the nearest point's bits, index.
+    order: Vec<u64>,
     draw: Vec<DrawCell>,
     splats: Vec<Splat>,
     status: Vec<PixelStatus>,
@@ -343,6 +345,7 @@ impl Renderer {
                 .map(|_| [AtomicU64::new(0), AtomicU64::new(0)])
                 .collect(),
             candidates: Vec::new(),
+            order: Vec::new(),
             draw: Vec::new(),
             splats: Vec::new(),
             status: vec![PixelStatus::Sky; n],
@@ -430,7 +433,7 @@ impl Renderer {
             let first = self.draw.len();
             let mut batch_points = 0;
             while next < self.candidates.len() && batch_points < target {
-                let candidate = self.candidates[next];
+                let candidate = self.candidates[self.order[next] as u32 as usize];
                 next += 1;
                 if occlusion && points_drawn > 0 && self.occluded(&candidate, &view) {
                     cells_occluded += 1;
@@ -582,12 +585,18 @@ impl Renderer {
                 nearest_m: (d - cell.radius).max(0.0),
             });
         }
-        // Front to back; ties by position in the cloud, so the order is total.
-        self.candidates.sort_unstable_by(|a, b| {
-            a.nearest_m
-                .total_cmp(&b.nearest_m)
-                .then(a.cell.start.cmp(&b.cell.start))
-        });
+        // Front to back; ties by position in the cloud, so the order is total. Sorted
+        // as integers: a non-negative range orders as its bits (a `-0.0` would come
+        // last, which only the time could notice: the image does not depend on the
+        // order in which cells are drawn).
+        self.order.clear();
+        self.order.extend(
+            self.candidates
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (u64::from(c.nearest_m.to_bits()) << 32) | i as u64),
+        );
+        self.order.sort_unstable();
     }
 
     /// Whether every pixel that a point of `candidate` could cover already holds a
