@@ -21,9 +21,12 @@
 //!    pixels with no sample inside the valid region are sky (`background`, infinite
 //!    range), pixels outside it are masked.
 //!
-//! **Culling and level of detail.** Cells of the cloud entirely outside the camera's
-//! field (the range of angles off the optical axis that its valid pixels see) are
-//! skipped. The others are drawn front to back in batches; between batches, a cell
+//! **Culling and level of detail.** The buffers cover only the smallest rectangle that
+//! holds the camera's valid pixels (the catadioptric disc's box: 71 % of a 640×480
+//! image), and splats are clipped to it: what they would draw outside lands on masked
+//! pixels, so the frame is the same (tested). Cells of the cloud entirely outside the
+//! camera's field (the range of angles off the optical axis that its valid pixels see)
+//! are skipped. The others are drawn front to back in batches; between batches, a cell
 //! whose every possibly covered pixel (a conservative image rectangle of its bounding
 //! sphere, splats included) already holds a range nearer than the cell's nearest point
 //! by more than the depth band is skipped (**occlusion culling**). The test is
@@ -165,7 +168,8 @@ impl RenderOptions {
 pub struct RenderStats {
     /// Cells drawn (in the field of view and not occluded).
     pub cells_drawn: usize,
-    /// Cells in the field of view skipped as occluded.
+    /// Cells in the field of view skipped as occluded (or as reaching no pixel of the
+    /// valid pixels' box).
     pub cells_occluded: usize,
     /// Points drawn (after culling and level of detail).
     pub points_drawn: usize,
@@ -203,8 +207,8 @@ fn affine_norm(a: f64, b: f64, s: f64) -> f32 {
 const TILE: usize = 8;
 
 /// Tiles along an image side of `pixels`.
-fn tiles(pixels: u32) -> usize {
-    (pixels as usize).div_ceil(TILE)
+fn tiles(pixels: usize) -> usize {
+    pixels.div_ceil(TILE)
 }
 
 /// The first batch of points drawn before any occlusion test, and the smallest batch.
@@ -223,6 +227,9 @@ struct View {
     translation: Vec3,
     alpha: f32,
     xi: f32,
+    /// The first column and row of the [`Region`] (splats' pixels are counted from it).
+    origin: [i32; 2],
+    /// The [`Region`]'s width and height, pixels.
     width: i32,
     height: i32,
     splat_scale: f32,
@@ -237,9 +244,15 @@ struct View {
 }
 
 impl View {
-    /// The constants of a rendering with `camera` and `options` from the pose
-    /// `rotation`, `translation` (camera from the cloud's frame).
-    fn new(camera: &Camera, options: &RenderOptions, rotation: Mat3, translation: Vec3) -> Self {
+    /// The constants of a rendering with `camera` and `options` into `region` from
+    /// the pose `rotation`, `translation` (camera from the cloud's frame).
+    fn new(
+        camera: &Camera,
+        options: &RenderOptions,
+        region: Region,
+        rotation: Mat3,
+        translation: Vec3,
+    ) -> Self {
         let i = camera.intrinsics();
         Self {
             undistorted: camera.distortion().is_none(),
@@ -252,8 +265,9 @@ impl View {
             translation,
             alpha: i.alpha_u.max(i.alpha_v) as f32,
             xi: i.xi as f32,
-            width: camera.width() as i32,
-            height: camera.height() as i32,
+            origin: [region.u0 as i32, region.v0 as i32],
+            width: region.width as i32,
+            height: region.height as i32,
             splat_scale: options.splat_scale,
             max_width: 2 * options.max_splat_radius_px.min(16_000) as i32 + 1,
             affine_norm: affine_norm(i.alpha_u, i.alpha_v, i.skew),
@@ -263,11 +277,67 @@ impl View {
     }
 }
 
+/// The smallest rectangle of the image that holds every valid pixel of the camera:
+/// the renderer's buffers cover it alone, and splats are clipped to it (whatever would
+/// be drawn outside it lands on masked pixels, so the frame is the same; at 640×480
+/// the catadioptric disc's box holds 71 % of the pixels).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Region {
+    u0: usize,
+    v0: usize,
+    width: usize,
+    height: usize,
+}
+
+impl Region {
+    /// The box of `camera`'s valid pixels (one pixel at the origin if none is valid).
+    fn of(camera: &Camera) -> Self {
+        let w = camera.width() as usize;
+        let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+        for (k, _) in camera
+            .valid_pixels()
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| **v)
+        {
+            let (u, v) = (k % w, k / w);
+            (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+        }
+        if u0 > u1 {
+            return Self {
+                u0: 0,
+                v0: 0,
+                width: 1,
+                height: 1,
+            };
+        }
+        Self {
+            u0,
+            v0,
+            width: u1 - u0 + 1,
+            height: v1 - v0 + 1,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// The region's index of the image pixel `k` of an image `image_width` wide
+    /// (which must lie inside the region).
+    #[inline(always)]
+    fn index(&self, k: usize, image_width: usize) -> usize {
+        (k / image_width - self.v0) * self.width + k % image_width - self.u0
+    }
+}
+
 /// A renderer for one camera, owning its buffers (no allocation per frame once warm).
 #[derive(Debug)]
 pub struct Renderer {
     camera: Camera,
     options: RenderOptions,
+    /// What the buffers below cover (pixels of the [`Region`], row-major).
+    region: Region,
     depth: Vec<AtomicU32>,
     /// Per pixel: `(Σ intensity << 24) | count` and `Σ range`, fixed point,
     /// interleaved so that pass 2 touches one cache line per pixel.
@@ -278,8 +348,8 @@ pub struct Renderer {
     draw: Vec<DrawCell>,
     splats: Vec<Splat>,
     status: Vec<PixelStatus>,
-    /// Per pixel: all ones where valid, zero where masked (masked pixels never keep a
-    /// cell from being culled).
+    /// Per pixel of the region: all ones where valid, zero where masked (masked pixels
+    /// never keep a cell from being culled).
     valid_bits: Vec<u32>,
     /// Per tile of `TILE × TILE` pixels: the farthest key of its valid pixels (as in
     /// [`Renderer::occluded`]) when `tile_batch` equals the batch being tested, else
@@ -302,8 +372,19 @@ const RANGE_SCALE: f32 = 4096.0;
 impl Renderer {
     /// A renderer for `camera`. Fails on invalid options.
     pub fn new(camera: Camera, options: RenderOptions) -> Result<Self, SplatError> {
+        let region = Region::of(&camera);
+        Self::with_region(camera, options, region)
+    }
+
+    /// [`Renderer::new`] with buffers over `region` (which must hold every valid pixel
+    /// of the camera, and lie inside its image).
+    fn with_region(
+        camera: Camera,
+        options: RenderOptions,
+        region: Region,
+    ) -> Result<Self, SplatError> {
         options.validate()?;
-        let n = camera.pixel_count();
+        let n = region.len();
         // The range of angles off the optical axis seen by the valid pixels, widened by
         // a pixel's angle.
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -331,15 +412,19 @@ impl Renderer {
         } else {
             (0.0, std::f32::consts::PI)
         };
-        let tile_count = tiles(camera.width()) * tiles(camera.height());
-        let valid_bits = camera
-            .valid_pixels()
-            .iter()
-            .map(|&v| if v { u32::MAX } else { 0 })
+        let tile_count = tiles(region.width) * tiles(region.height);
+        let valid = camera.valid_pixels();
+        let valid_bits = (0..n)
+            .map(|k| {
+                let (u, v) = (region.u0 + k % region.width, region.v0 + k / region.width);
+                if valid[v * w + u] { u32::MAX } else { 0 }
+            })
             .collect();
+        let status = vec![PixelStatus::Sky; camera.pixel_count()];
         Ok(Self {
             camera,
             options,
+            region,
             depth: (0..n).map(|_| AtomicU32::new(EMPTY)).collect(),
             accum: (0..n)
                 .map(|_| [AtomicU64::new(0), AtomicU64::new(0)])
@@ -348,7 +433,7 @@ impl Renderer {
             order: Vec::new(),
             draw: Vec::new(),
             splats: Vec::new(),
-            status: vec![PixelStatus::Sky; n],
+            status,
             valid_bits,
             tile_farthest: vec![0; tile_count],
             tile_batch: vec![0; tile_count],
@@ -400,7 +485,13 @@ impl Renderer {
         // Points are relative to the cloud's origin: fold it into the translation (f64).
         let translation = camera_from_world.transform_point(cloud.origin());
         let (rotation, _) = camera_from_world.to_f32();
-        let view = View::new(&self.camera, &self.options, rotation, translation.as_vec3());
+        let view = View::new(
+            &self.camera,
+            &self.options,
+            self.region,
+            rotation,
+            translation.as_vec3(),
+        );
 
         self.select_cells(cloud, &view);
         let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
@@ -467,17 +558,21 @@ impl Renderer {
         // Resolve.
         let background = self.options.background;
         let valid = self.camera.valid_pixels();
+        let image_width = self.camera.width() as usize;
         let mut pixels_hit = 0;
         for k in 0..valid.len() {
-            let key = self.depth[k].load(Ordering::Relaxed);
-            let sums = self.accum[k][0].load(Ordering::Relaxed);
-            let range_sum = self.accum[k][1].load(Ordering::Relaxed);
-            let count = sums & COUNT_MASK;
             if !valid[k] {
                 frame.intensity[k] = 0.0;
                 frame.range_m[k] = f32::NAN;
                 frame.status[k] = PixelStatus::Masked;
-            } else if key == EMPTY || count == 0 {
+                continue;
+            }
+            let r = self.region.index(k, image_width);
+            let key = self.depth[r].load(Ordering::Relaxed);
+            let sums = self.accum[r][0].load(Ordering::Relaxed);
+            let range_sum = self.accum[r][1].load(Ordering::Relaxed);
+            let count = sums & COUNT_MASK;
+            if key == EMPTY || count == 0 {
                 frame.intensity[k] = background;
                 frame.range_m[k] = f32::INFINITY;
                 frame.status[k] = PixelStatus::Sky;
@@ -609,9 +704,9 @@ impl Renderer {
             return false;
         };
         if u0 > u1 || v0 > v1 {
-            return true; // entirely outside the image: nothing would be drawn
+            return true; // entirely outside the region: nothing would be drawn there
         }
-        let w = self.camera.width() as usize;
+        let w = self.region.width;
         // Margins cover the f32 rounding of the points' ranges and of the band test.
         let nearest = candidate.nearest_m * (1.0 - 1e-4) - 1e-3;
         // Whether every pixel is nearer than the cell by more than the band, given the
@@ -621,7 +716,7 @@ impl Renderer {
         };
         // First the tiles holding the rectangle (each tile's farthest key bounds its
         // pixels'): most occluded cells are decided there, without reading every pixel.
-        let tiles_wide = tiles(self.camera.width());
+        let tiles_wide = tiles(self.region.width);
         let mut hidden_by_tiles = true;
         'tiles: for tv in v0 / TILE..=v1 / TILE {
             for tu in u0 / TILE..=u1 / TILE {
@@ -654,7 +749,7 @@ impl Renderer {
     /// recomputed if a batch was drawn since.
     fn tile_farthest(&mut self, index: usize, tu: usize, tv: usize) -> u32 {
         if self.tile_batch[index] != self.batch {
-            let (w, h) = (self.camera.width() as usize, self.camera.height() as usize);
+            let (w, h) = (self.region.width, self.region.height);
             let (u0, u1) = (tu * TILE, ((tu + 1) * TILE).min(w));
             let mut farthest = 0u32;
             for row in tv * TILE..((tv + 1) * TILE).min(h) {
@@ -799,17 +894,19 @@ impl Renderer {
 
 /// The pixel rectangle of an image box `[u_lo, u_hi, v_lo, v_hi]` of projections,
 /// widened by splats of half-width `half` (and 2 pixels of margin), clipped to the
-/// image (empty if outside it); `None` if the box is not finite.
+/// region and counted from its first pixel (empty if outside it); `None` if the box is
+/// not finite.
 fn clip_rect(image_box: [f32; 4], half: f32, view: &View) -> Option<[usize; 4]> {
     if !image_box.iter().all(|x| x.is_finite()) {
         return None;
     }
     let [u_lo, u_hi, v_lo, v_hi] = image_box;
     let pad = half + 2.0;
-    let clip = |lo: f32, hi: f32, n: i32| -> (usize, usize) {
-        // Limited to just outside the image first, so that floor_small applies.
-        let lo = floor_small(limit(lo - pad, -2.0, n as f32 + 1.0)).max(0);
-        let hi = -floor_small(-limit(hi + pad, -2.0, n as f32 + 1.0));
+    let clip = |lo: f32, hi: f32, origin: i32, n: i32| -> (usize, usize) {
+        // Limited to just outside the region first, so that floor_small applies.
+        let (first, last) = (origin as f32 - 2.0, (origin + n) as f32 + 1.0);
+        let lo = (floor_small(limit(lo - pad, first, last)) - origin).max(0);
+        let hi = -floor_small(-limit(hi + pad, first, last)) - origin;
         let hi = hi.min(n - 1);
         if lo > hi {
             (1, 0)
@@ -817,8 +914,9 @@ fn clip_rect(image_box: [f32; 4], half: f32, view: &View) -> Option<[usize; 4]> 
             (lo as usize, hi as usize)
         }
     };
-    let (u0, u1) = clip(u_lo, u_hi, view.width);
-    let (v0, v1) = clip(v_lo, v_hi, view.height);
+    let [origin_u, origin_v] = view.origin;
+    let (u0, u1) = clip(u_lo, u_hi, origin_u, view.width);
+    let (v0, v1) = clip(v_lo, v_hi, origin_v, view.height);
     Some([u0, u1, v0, v1])
 }
 
@@ -995,8 +1093,8 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
     // Footprint in pixels: spacing · α/D · max((ρ + ξZ)/D, 1).
     let size = footprint * inv_d * ((rho + view.xi * pc.z) * inv_d).max(1.0);
     let width = splat_width(size, view.max_width);
-    let iu = first_px(u, width);
-    let iv = first_px(v, width);
+    let iu = first_px(u, width) - view.origin[0];
+    let iv = first_px(v, width) - view.origin[1];
     if iu + width <= 0 || iv + width <= 0 || iu >= view.width || iv >= view.height {
         return None;
     }
@@ -1311,7 +1409,10 @@ fn project_lanes_portable<const N: usize>(
         let v = view.alpha_v * (pcy * inv_d) + view.v0;
         let size = footprint * inv_d * ((rho + view.xi * pcz) * inv_d).max(1.0);
         let n = splat_width(size, view.max_width);
-        let (pu, pv) = (first_px(u, n), first_px(v, n));
+        let (pu, pv) = (
+            first_px(u, n) - view.origin[0],
+            first_px(v, n) - view.origin[1],
+        );
         let in_image = (pu + n > 0) & (pv + n > 0) & (pu < view.width) & (pv < view.height);
         out.iu[k] = pu;
         out.iv[k] = pv;
@@ -1702,6 +1803,93 @@ mod tests {
         baseline
     }
 
+    /// The frame drawn into the box of the valid pixels equals, bit for bit, the one
+    /// drawn into the whole image (what the box leaves out lands on masked pixels), on
+    /// one thread and on several, with and without occlusion culling.
+    #[test]
+    fn the_valid_pixels_box_draws_the_frame_of_the_whole_image() {
+        let camera = Camera::new(
+            Intrinsics {
+                alpha_u: 60.0,
+                alpha_v: 60.0,
+                u0: 159.5,
+                v0: 119.5,
+                xi: 0.9,
+                skew: 0.0,
+            },
+            None,
+            320,
+            240,
+            ValidRegion::Annulus(ucm::Annulus {
+                center_px: [159.5, 119.5],
+                inner_radius_px: 25.0,
+                outer_radius_px: 100.0,
+            }),
+        )
+        .unwrap();
+        let region = Region::of(&camera);
+        assert!(region.len() < 320 * 200, "{region:?}");
+        // Points all around the camera, many hidden behind others, some seen only
+        // outside the annulus.
+        let mut rng = crate::rng::SplitMix64::new(7);
+        let mut positions = Vec::new();
+        let mut intensities = Vec::new();
+        while positions.len() < 40_000 {
+            let p = glam::DVec3::new(
+                rng.unit() * 40.0 - 20.0,
+                rng.unit() * 40.0 - 20.0,
+                rng.unit() * 12.0 - 4.0,
+            );
+            if p.length() > 1.0 {
+                positions.push(p);
+                intensities.push(rng.unit() as f32);
+            }
+        }
+        let cloud =
+            PointCloud::from_points(glam::DVec3::ZERO, &positions, &intensities, None, Some(0.2))
+                .unwrap();
+        let pose = Isometry3::from_pose_vector([0.3, -0.2, 0.1, 0.05, -0.1, 0.2]).unwrap();
+        let whole = Region {
+            u0: 0,
+            v0: 0,
+            width: 320,
+            height: 240,
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        for (parallel, occlusion_culling) in [(false, true), (true, true), (false, false)] {
+            let options = RenderOptions {
+                parallel,
+                occlusion_culling,
+                ..RenderOptions::default()
+            };
+            let [(full, full_hit), (cropped, hit)] = [whole, region].map(|r| {
+                let mut renderer = Renderer::with_region(camera.clone(), options, r).unwrap();
+                let mut frame = Frame::for_camera(&camera);
+                let stats = pool.install(|| renderer.render(&cloud, &pose, &mut frame).unwrap());
+                (frame, stats.pixels_hit)
+            });
+            assert!(hit > 5_000, "{hit} pixels hit");
+            assert_eq!(hit, full_hit);
+            assert_eq!(cropped.status, full.status);
+            let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&cropped.intensity), bits(&full.intensity));
+            assert_eq!(bits(&cropped.range_m), bits(&full.range_m));
+        }
+    }
+
+    /// Regions of the 320×240 test image: the whole image or a box inside it.
+    fn regions() -> impl Strategy<Value = Region> {
+        (0usize..60, 0usize..40, 0usize..60, 0usize..40).prop_map(|(u0, v0, du, dv)| Region {
+            u0,
+            v0,
+            width: 320 - u0 - du,
+            height: 240 - v0 - dv,
+        })
+    }
+
     proptest! {
         /// `floor_small` is `floor` over its whole domain, halves and negative values
         /// included.
@@ -1729,10 +1917,11 @@ mod tests {
             spacing_m in 0.005f32..0.3,
             splat_scale in 0.5f32..3.0,
             max_radius in 0u32..12,
+            region in regions(),
         ) {
             let (camera, options) = test_setup(alpha_u, aspect, skew, xi, splat_scale, max_radius);
             let renderer = Renderer::new(camera.clone(), options).unwrap();
-            let view = View::new(&camera, &options, Mat3::IDENTITY, Vec3::ZERO);
+            let view = View::new(&camera, &options, region, Mat3::IDENTITY, Vec3::ZERO);
             let center = Vec3::from_array(direction).normalize_or(Vec3::Z) * distance_m;
             let candidate = Candidate {
                 cell: DrawCell { start: 0, count: 1, spacing_m },
@@ -1759,7 +1948,7 @@ mod tests {
                     continue;
                 };
                 splat.for_each_pixel(&view, |k| {
-                    let (u, v) = (k % 320, k / 320);
+                    let (u, v) = (k % region.width, k / region.width);
                     assert!(
                         (ru0..=ru1).contains(&u) && (rv0..=rv1).contains(&v),
                         "pixel ({u}, {v}) of a splat of {p} outside [{ru0}, {ru1}] x [{rv0}, {rv1}]"
@@ -1784,11 +1973,13 @@ mod tests {
             spacing_m in 0.001f32..0.5,
             splat_scale in 0.5f32..3.0,
             max_radius in 0u32..12,
+            region in regions(),
         ) {
             let (camera, options) = test_setup(alpha_u, aspect, skew, xi, splat_scale, max_radius);
             let view = View::new(
                 &camera,
                 &options,
+                region,
                 Mat3::from_axis_angle(
                     Vec3::from_array(axis_angle).normalize_or(Vec3::Z),
                     Vec3::from_array(axis_angle).length(),

@@ -106,6 +106,8 @@ pub(super) struct Constants<V: Vectors> {
     max_half: V::I,
     zero_i: V::I,
     one_i: V::I,
+    origin_u: V::I,
+    origin_v: V::I,
     width: V::I,
     height: V::I,
     not_drawn: V::I,
@@ -150,6 +152,8 @@ impl<V: Vectors> Constants<V> {
             max_half: o.splat_i((view.max_width - 1) >> 1),
             zero_i: o.splat_i(0),
             one_i: o.splat_i(1),
+            origin_u: o.splat_i(view.origin[0]),
+            origin_v: o.splat_i(view.origin[1]),
             width: o.splat_i(view.width),
             height: o.splat_i(view.height),
             not_drawn: o.splat_i(i32::from(NOT_DRAWN)),
@@ -204,7 +208,10 @@ pub(super) fn splat_words<V: Vectors>(
     );
     let half = splat_half(o, size, c.max_half);
     let n = o.add_i(o.add_i(half, half), c.one_i);
-    let (pu, pv) = (first_px(o, u, half), first_px(o, v, half));
+    let (pu, pv) = (
+        o.sub_i(first_px(o, u, half), c.origin_u),
+        o.sub_i(first_px(o, v, half), c.origin_v),
+    );
     let in_image = o.and_m(
         o.and_m(
             o.gt_i(o.add_i(pu, n), c.zero_i),
