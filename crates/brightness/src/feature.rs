@@ -5,6 +5,7 @@ use ucm::{Camera, PixelGrid};
 
 use crate::BrightnessError;
 use crate::gradient::MaskedGradient;
+use crate::photometric;
 
 /// The brightness feature of one camera, with its buffers (no allocation per image).
 #[derive(Debug, Clone)]
@@ -13,6 +14,11 @@ pub struct Brightness {
     gradient_plan: MaskedGradient,
     /// `[start, end)` row-major runs of valid pixels.
     valid_runs: Vec<[u32; 2]>,
+    /// The rows `[T_u | R_u]` and `[T_v | R_v]` of the valid pixels' factors
+    /// ([`PixelGrid::factors`]), one run after the other: what the interaction rows
+    /// read, contiguous.
+    factors_u: Vec<[f32; 6]>,
+    factors_v: Vec<[f32; 6]>,
     width: usize,
     height: usize,
     samples: Vec<u32>,
@@ -48,10 +54,16 @@ impl Brightness {
                 _ => valid_runs.push([k, k + 1]),
             }
         }
+        let (factors_u, factors_v) = samples
+            .iter()
+            .map(|&k| photometric::factor_rows(&grid.factors()[k as usize]))
+            .unzip();
         Self {
             grid,
             gradient_plan,
             valid_runs,
+            factors_u,
+            factors_v,
             width,
             height,
             samples,
@@ -139,17 +151,17 @@ impl Brightness {
         // start, and only the region is written.
         self.gradient_plan
             .compute(&self.image, valid, &mut self.gradient);
-        let factors = self.grid.factors();
+        let mut first = 0;
         for &[start, end] in &self.valid_runs {
-            let run = start as usize..end as usize;
-            for (((l, f), &g), &r) in self.pixel_interaction[run.clone()]
-                .iter_mut()
-                .zip(&factors[run.clone()])
-                .zip(&self.gradient[run.clone()])
-                .zip(&self.inverse_range[run])
-            {
-                *l = f.photometric(g, r);
-            }
+            let (run, n) = (start as usize..end as usize, (end - start) as usize);
+            photometric::rows(photometric::Run {
+                u: &self.factors_u[first..first + n],
+                v: &self.factors_v[first..first + n],
+                gradient: &self.gradient[run.clone()],
+                inverse_range: &self.inverse_range[run.clone()],
+                out: &mut self.pixel_interaction[run],
+            });
+            first += n;
         }
         Ok(())
     }

@@ -5,6 +5,7 @@ mod error;
 mod feature;
 mod gradient;
 mod normal;
+mod photometric;
 
 pub use error::BrightnessError;
 pub use feature::Brightness;
