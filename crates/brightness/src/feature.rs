@@ -113,6 +113,18 @@ impl Brightness {
                 height: self.height as u32,
             });
         }
+        // Compiled for the widest instruction set found at run time, so that the plain
+        // loops below are vectorised with it (the same operations: the same bits).
+        pulp::Arch::new().dispatch(Pixels {
+            brightness: self,
+            picture,
+        });
+        Ok(())
+    }
+
+    /// The body of [`Brightness::compute_pixels`], once the size is checked.
+    #[inline(always)]
+    fn pixels(&mut self, picture: &impl AnyImage) {
         let valid = self.grid.valid();
         picture
             .inverse_range(&mut self.inverse_range)
@@ -163,7 +175,6 @@ impl Brightness {
             });
             first += n;
         }
-        Ok(())
     }
 
     /// Row-major pixel indices of the samples (the valid pixels).
@@ -225,5 +236,21 @@ impl Brightness {
     /// The factor applied by normalisation to the last image (1 without).
     pub fn normalization_scale(&self) -> f32 {
         self.scale
+    }
+}
+
+/// [`Brightness::pixels`] as a `pulp` kernel (a struct with an inlined method, not a
+/// closure: only what is inlined into `with_simd` is compiled for its instruction set).
+struct Pixels<'a, P> {
+    brightness: &'a mut Brightness,
+    picture: &'a P,
+}
+
+impl<P: AnyImage> pulp::WithSimd for Pixels<'_, P> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.brightness.pixels(self.picture);
     }
 }

@@ -107,6 +107,7 @@ impl MaskedGradient {
 
     /// [`masked_gradient`] at the valid pixels (the same values, bit for bit); `out` is
     /// left as it is at the others.
+    #[inline(always)]
     pub(crate) fn compute(&self, image: &[f32], valid: &[bool], out: &mut [[f32; 2]]) {
         let w = self.width;
         for &[start, end] in &self.interior {

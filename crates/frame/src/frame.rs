@@ -168,6 +168,7 @@ impl Frame {
     }
 
     /// Write `1/ρ` of every pixel into `out` (0 for sky and masked pixels).
+    #[inline]
     pub fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
         if out.len() != self.range_m.len() {
             return Err(FrameError::Length {
@@ -218,6 +219,7 @@ impl AnyImage for Frame {
         self.status[index] != PixelStatus::Masked
     }
 
+    #[inline]
     fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
         Frame::inverse_range(self, out)
     }
