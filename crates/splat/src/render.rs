@@ -54,15 +54,15 @@
 //! the compiler vectorises; then it scatters their splats. Every kernel gives the same
 //! bits.
 //! The points 512 ahead in the draw list are prefetched, a few cache lines per block
-//! (cells are drawn front to back, not in memory order). Single-pixel splats (most of them) skip the
-//! square loops, and the single-threaded passes take minima and add samples without a
-//! branch (whether a point is nearer is unpredictable). Each point's splat is bit for
-//! bit the one of the scalar reference (tested, both kernels). A splat whose every
-//! pixel already holds a range below its depth band when pass 1 reaches it is dropped
-//! there (pass 2 would reject it everywhere, since depths only decrease), so pass 2
-//! reads only the splats that may add a sample: about 40 % of those drawn at a street
-//! pose. The occlusion test of a cell stops at the first tile, then the first row of
-//! its rectangle, that shows it may be visible.
+//! (cells are drawn front to back, not in memory order). Single-pixel splats (most of
+//! them) skip the square loops, and the single-threaded passes take minima and add
+//! samples without a branch (whether a point is nearer is unpredictable). Each point's
+//! splat is bit for bit the one of the scalar reference (tested, both kernels). A
+//! splat whose every pixel already holds a range below its depth band when pass 1
+//! reaches it is dropped there (pass 2 would reject it everywhere, since depths only
+//! decrease), so pass 2 reads only the splats that may add a sample: about 40 % of
+//! those drawn at a street pose. The occlusion test of a cell stops at the first tile,
+//! then the first row of its rectangle, that shows it may be visible.
 
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
