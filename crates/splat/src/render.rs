@@ -492,7 +492,20 @@ impl Renderer {
             rotation,
             translation.as_vec3(),
         );
+        // Compiled for the widest instruction set found at run time (the occlusion
+        // tests' scans and the resolve vectorise with it; the same operations, so the
+        // same bits).
+        Ok(pulp::Arch::new().dispatch(RenderView {
+            renderer: self,
+            cloud,
+            view,
+            frame,
+        }))
+    }
 
+    /// The body of [`Renderer::render`], once its arguments are checked.
+    #[inline(always)]
+    fn render_view(&mut self, cloud: &PointCloud, view: View, frame: &mut Frame) -> RenderStats {
         self.select_cells(cloud, &view);
         let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
 
@@ -588,17 +601,18 @@ impl Renderer {
         if self.options.fill_holes {
             pixels_hit += self.fill_holes(frame);
         }
-        Ok(RenderStats {
+        RenderStats {
             cells_drawn: self.draw.len(),
             cells_occluded,
             points_drawn,
             pixels_hit,
-        })
+        }
     }
 
     /// Fill isolated sky pixels surrounded by hits (decided on the statuses before
     /// filling, so the result does not depend on the scan order). Returns the number
     /// of pixels filled.
+    #[inline(always)]
     fn fill_holes(&mut self, frame: &mut Frame) -> usize {
         self.status.copy_from_slice(&frame.status);
         let (w, h) = (frame.width() as usize, frame.height() as usize);
@@ -638,6 +652,7 @@ impl Renderer {
 
     /// Field-of-view culling and level of detail: fill `self.candidates`, nearest
     /// first.
+    #[inline(always)]
     fn select_cells(&mut self, cloud: &PointCloud, view: &View) {
         self.candidates.clear();
         let spacing = cloud.spacing_m();
@@ -699,6 +714,7 @@ impl Renderer {
     /// change nothing). Conservative: `false` whenever in doubt. Takes the depth
     /// buffer mutably (no other thread draws meanwhile) so that its rows are read as
     /// plain integers, several at a time.
+    #[inline(always)]
     fn occluded(&mut self, candidate: &Candidate, view: &View) -> bool {
         let Some([u0, u1, v0, v1]) = self.image_rect(candidate, view) else {
             return false;
@@ -747,6 +763,7 @@ impl Renderer {
 
     /// The farthest key of the valid pixels of tile `index` (column `tu`, row `tv`),
     /// recomputed if a batch was drawn since.
+    #[inline(always)]
     fn tile_farthest(&mut self, index: usize, tu: usize, tv: usize) -> u32 {
         if self.tile_batch[index] != self.batch {
             let (w, h) = (self.region.width, self.region.height);
@@ -780,6 +797,7 @@ impl Renderer {
     /// of the centre's image (a geodesic of length at most `β ≤ tan β` joins them
     /// inside the cone), and the affine intrinsics stretch that disc by at most their
     /// largest singular value. For `ξ > 1`, see [`Renderer::sector_box`].
+    #[inline(always)]
     fn image_rect(&self, candidate: &Candidate, view: &View) -> Option<[usize; 4]> {
         let c = candidate.center;
         let d = c.length();
@@ -892,10 +910,29 @@ impl Renderer {
     }
 }
 
+/// [`Renderer::render_view`] as a `pulp` kernel (a struct with an inlined method, not a
+/// closure: only what is inlined into `with_simd` is compiled for its instruction set).
+struct RenderView<'a> {
+    renderer: &'a mut Renderer,
+    cloud: &'a PointCloud,
+    view: View,
+    frame: &'a mut Frame,
+}
+
+impl pulp::WithSimd for RenderView<'_> {
+    type Output = RenderStats;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> RenderStats {
+        self.renderer.render_view(self.cloud, self.view, self.frame)
+    }
+}
+
 /// The pixel rectangle of an image box `[u_lo, u_hi, v_lo, v_hi]` of projections,
 /// widened by splats of half-width `half` (and 2 pixels of margin), clipped to the
 /// region and counted from its first pixel (empty if outside it); `None` if the box is
 /// not finite.
+#[inline(always)]
 fn clip_rect(image_box: [f32; 4], half: f32, view: &View) -> Option<[usize; 4]> {
     if !image_box.iter().all(|x| x.is_finite()) {
         return None;
