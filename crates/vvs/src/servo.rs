@@ -871,16 +871,14 @@ impl<'a> Servo<'a> {
             if let Some(Robust::Tukey { c }) = self.config.robust {
                 tukey_weights(&self.residuals, c, &mut self.weights, &mut self.scratch);
             }
-            // Both sums in one pass (two independent chains of additions, each in the
-            // order and from the -0.0 of `Iterator::sum`).
-            let (weight_sum, weighted_squares) = self.residuals.iter().zip(&self.weights).fold(
-                (-0.0f64, -0.0f64),
-                |(weights, squares), (&e, &w)| {
-                    let w = f64::from(w);
-                    (weights + w, squares + w * f64::from(e) * f64::from(e))
-                },
-            );
-            cost = weighted_squares / weight_sum.max(1.0);
+            let weight_sum: f64 = self.weights.iter().map(|&w| f64::from(w)).sum();
+            cost = self
+                .residuals
+                .iter()
+                .zip(&self.weights)
+                .map(|(&e, &w)| f64::from(w) * f64::from(e) * f64::from(e))
+                .sum::<f64>()
+                / weight_sum.max(1.0);
             if !cost.is_finite() {
                 return Ok(StageResult {
                     stop: StopReason::Diverged(Divergence::NotFinite),
