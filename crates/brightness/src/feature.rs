@@ -129,14 +129,16 @@ impl Brightness {
         picture
             .inverse_range(&mut self.inverse_range)
             .expect("picture size checked above");
-        let intensity = picture.intensity();
-        for k in 0..self.image.len() {
-            let seen = valid[k] && picture.is_observed(k);
-            self.image[k] = if seen { intensity[k] } else { 0.0 };
-            if !valid[k] {
-                self.inverse_range[k] = 0.0;
-            }
+        // The image is zero outside the valid pixels from the start and never written
+        // there; the inverse ranges are zeroed between the valid runs.
+        let mut end = 0;
+        for &[start, stop] in &self.valid_runs {
+            let run = start as usize..stop as usize;
+            self.inverse_range[end..run.start].fill(0.0);
+            picture.observed_intensity(run.clone(), &mut self.image[run.clone()]);
+            end = run.end;
         }
+        self.inverse_range[end..].fill(0.0);
         self.scale = 1.0;
         if self.normalize {
             let m = self.samples.len().max(1) as f64;

@@ -220,6 +220,15 @@ impl AnyImage for Frame {
     }
 
     #[inline]
+    fn observed_intensity(&self, pixels: std::ops::Range<usize>, out: &mut [f32]) {
+        assert_eq!(out.len(), pixels.len(), "one value per pixel");
+        let status = &self.status[pixels.clone()];
+        for ((o, &i), &s) in out.iter_mut().zip(&self.intensity[pixels]).zip(status) {
+            *o = if s != PixelStatus::Masked { i } else { 0.0 };
+        }
+    }
+
+    #[inline]
     fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
         Frame::inverse_range(self, out)
     }

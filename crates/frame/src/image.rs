@@ -288,6 +288,15 @@ impl AnyImage for Image {
         self.valid[index]
     }
 
+    #[inline]
+    fn observed_intensity(&self, pixels: std::ops::Range<usize>, out: &mut [f32]) {
+        assert_eq!(out.len(), pixels.len(), "one value per pixel");
+        let valid = &self.valid[pixels.clone()];
+        for ((o, &i), &v) in out.iter_mut().zip(&self.intensity[pixels]).zip(valid) {
+            *o = if v { i } else { 0.0 };
+        }
+    }
+
     fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
         if out.len() != self.intensity.len() {
             return Err(FrameError::Length {

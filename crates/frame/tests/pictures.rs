@@ -265,3 +265,53 @@ fn frame_view() {
     let image = Image::from_frame(&frame);
     assert_eq!(image.valid, vec![true, true, false]);
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// The branch-free `observed_intensity` of frames and images is the trait's
+    /// reference (each pixel's `is_observed`), bit for bit, on any stretch of pixels.
+    #[test]
+    fn observed_intensity_is_each_pixel_s_observation(
+        pixels in prop::collection::vec((0u8..3, -2.0f32..2.0), 1..200),
+        cut in (0usize..200, 0usize..200),
+    ) {
+        struct Reference<'a>(&'a Frame);
+        impl AnyImage for Reference<'_> {
+            fn width(&self) -> u32 { self.0.width() }
+            fn height(&self) -> u32 { self.0.height() }
+            fn intensity(&self) -> &[f32] { &self.0.intensity }
+            fn is_observed(&self, index: usize) -> bool { self.0.is_observed(index) }
+            fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
+                AnyImage::inverse_range(self.0, out)
+            }
+            fn downsampled(&self, _: u32, _: &Camera) -> Result<Self, FrameError> {
+                unreachable!("not used")
+            }
+        }
+        let n = pixels.len();
+        let mut frame = Frame::new(n as u32, 1);
+        for (k, &(status, intensity)) in pixels.iter().enumerate() {
+            frame.status[k] = [PixelStatus::Hit, PixelStatus::Sky, PixelStatus::Masked][status as usize];
+            frame.intensity[k] = intensity;
+        }
+        let (a, b) = (cut.0 % (n + 1), cut.1 % (n + 1));
+        let range = a.min(b)..a.max(b);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut expected = vec![7.0; range.len()];
+        Reference(&frame).observed_intensity(range.clone(), &mut expected);
+        for (k, &e) in range.clone().zip(&expected) {
+            prop_assert_eq!(e, if frame.is_observed(k) { frame.intensity[k] } else { 0.0 });
+        }
+        let mut got = vec![7.0; range.len()];
+        frame.observed_intensity(range.clone(), &mut got);
+        prop_assert_eq!(bits(&got), bits(&expected));
+        let image = Image::from_frame(&frame);
+        image.observed_intensity(range.clone(), &mut got);
+        let mut from_image = vec![7.0; range.len()];
+        for (o, k) in from_image.iter_mut().zip(range) {
+            *o = if image.is_observed(k) { image.intensity[k] } else { 0.0 };
+        }
+        prop_assert_eq!(bits(&got), bits(&from_image));
+    }
+}
