@@ -196,48 +196,55 @@ pub struct Pgm {
     gradient: Vec<[f32; 2]>,
 }
 
-/// How a sample is interpolated from the rows kept by `L_G`'s vertical pass: the
-/// cubic through four consecutive kept rows around it (the first of them as a pixel
-/// of the transposed packed plane, `x · kept + j`), by its Lagrange weights.
+/// How a run of samples is interpolated from the rows kept by `L_G`'s vertical pass:
+/// samples of one image row at consecutive pixels share the cubic through four
+/// consecutive kept rows around that row (the run's first pixel in the first of them
+/// as a pixel of the packed plane of kept rows, `j · width + x`), by its Lagrange
+/// weights.
 #[derive(Clone, Copy, Debug)]
 struct Between {
+    /// The run's first sample.
+    sample: u32,
+    /// Its number of samples.
+    len: u32,
     pixel: u32,
     weights: [f32; 4],
 }
 
-impl Between {
-    /// The interpolated pixel of the transposed packed plane `p`.
-    #[inline(always)]
-    fn interpolate(self, p: &[[f32; 6]]) -> [f32; 6] {
-        let k = self.pixel as usize;
-        let w = self.weights;
-        let [a, b, c, d] = [p[k], p[k + 1], p[k + 2], p[k + 3]];
-        std::array::from_fn(|i| w[0] * a[i] + w[1] * b[i] + w[2] * c[i] + w[3] * d[i])
-    }
-}
-
-/// The samples' `L_G` interpolated from the transposed packed plane, a
-/// [`crate::simd::Kernel`] (compiled for the widest instruction set).
+/// The samples' `L_G` interpolated from the packed plane of kept rows, a
+/// [`crate::simd::Kernel`] (compiled for the widest instruction set): per run, one
+/// weighted sum of four stretches of rows, element by element, so that the loop
+/// runs over whole registers.
 struct Interpolate<'a> {
     out: &'a mut [[f32; 6]],
     between: &'a [Between],
     plane: &'a [[f32; 6]],
+    width: usize,
 }
 
 impl crate::simd::Kernel for Interpolate<'_> {
     #[inline(always)]
     fn run(self) {
-        for (l, between) in self.out.iter_mut().zip(self.between) {
-            *l = between.interpolate(self.plane);
+        let width = self.width;
+        for run in self.between {
+            let (k, len) = (run.pixel as usize, run.len as usize);
+            let s = run.sample as usize;
+            let w = run.weights;
+            let row = |j: usize| self.plane[k + j * width..][..len].as_flattened();
+            let (a, b, c, d) = (row(0), row(1), row(2), row(3));
+            let out = self.out[s..s + len].as_flattened_mut();
+            for ((((o, a), b), c), d) in out.iter_mut().zip(a).zip(b).zip(c).zip(d) {
+                *o = w[0] * a + w[1] * b + w[2] * c + w[3] * d;
+            }
         }
     }
 }
 
-/// Per sample (row-major pixel index in an image `width` wide), its cubic between the
-/// rows `[r0, r1)` kept every `step` and the last (`kept` ≥ 4 of them,
-/// [`recursive::kept_rows`]): the kept rows `j − 1 … j + 2` around it, shifted
-/// inside at the ends (error `O(step⁴)` of the fourth derivative; a line between two
-/// rows would leave `O(step²)`).
+/// The runs of samples (row-major pixel indices in an image `width` wide, in
+/// row-major order) and their cubic between the rows `[r0, r1)` kept every `step`
+/// and the last (`kept` ≥ 4 of them, [`recursive::kept_rows`]): the kept rows
+/// `j − 1 … j + 2` around their row, shifted inside at the ends (error `O(step⁴)` of
+/// the fourth derivative; a line between two rows would leave `O(step²)`).
 fn interpolation(
     samples: &[u32],
     width: usize,
@@ -248,25 +255,34 @@ fn interpolation(
     // The rows `r0 + j · step` (`j < regular`), then the last row if off that grid.
     let regular = (r1 - 1 - r0) / step + 1;
     let row = |j: usize| if j < regular { r0 + j * step } else { r1 - 1 } as f64;
-    samples
-        .iter()
-        .map(|&k| {
-            let (x, y) = (k as usize % width, k as usize / width);
-            let first = ((y - r0) / step).saturating_sub(1).min(kept - 4);
-            let rows: [f64; 4] = std::array::from_fn(|i| row(first + i));
-            let y = y as f64;
-            let weights = std::array::from_fn(|i| {
-                (0..4)
-                    .filter(|&m| m != i)
-                    .map(|m| (y - rows[m]) / (rows[i] - rows[m]))
-                    .product::<f64>() as f32
-            });
-            Between {
-                pixel: (x * kept + first) as u32,
-                weights,
-            }
-        })
-        .collect()
+    let mut runs: Vec<Between> = Vec::new();
+    for (i, &k) in samples.iter().enumerate() {
+        if let Some(run) = runs.last_mut()
+            && i > 0
+            && k == samples[i - 1] + 1
+            && !(k as usize).is_multiple_of(width)
+        {
+            run.len += 1;
+            continue;
+        }
+        let (x, y) = (k as usize % width, k as usize / width);
+        let first = ((y - r0) / step).saturating_sub(1).min(kept - 4);
+        let rows: [f64; 4] = std::array::from_fn(|i| row(first + i));
+        let y = y as f64;
+        let weights = std::array::from_fn(|i| {
+            (0..4)
+                .filter(|&m| m != i)
+                .map(|m| (y - rows[m]) / (rows[i] - rows[m]))
+                .product::<f64>() as f32
+        });
+        runs.push(Between {
+            sample: i as u32,
+            len: 1,
+            pixel: (first * width + x) as u32,
+            weights,
+        });
+    }
+    runs
 }
 
 impl Pgm {
@@ -666,6 +682,14 @@ impl Pgm {
             let (src, dst) = (self.lanes_t.as_flattened(), self.lanes.as_flattened_mut());
             let win_t = packed.transposed().interleaved(6);
             recursive::columns(src, dst, 6 * kept, win_t, &f.g, Mode::Write, sc);
+            // Back to rows (`kept` rows of `w` pixels), so that the samples, in
+            // row-major order, read each kept row's pixels in order (strided reads of
+            // the transposed plane waited on memory).
+            let back = Window {
+                columns: [0, kept],
+                rows: win.columns,
+            };
+            recursive::transpose(&self.lanes, &mut self.lanes_t, kept, w, back);
             if self.interpolation_step != step {
                 self.interpolation = interpolation(&self.samples, w, win.rows, step, kept);
                 self.interpolation_step = step;
@@ -673,7 +697,8 @@ impl Pgm {
             crate::simd::on_widest(Interpolate {
                 out: &mut self.interaction,
                 between: &self.interpolation,
-                plane: &self.lanes,
+                plane: &self.lanes_t,
+                width: w,
             });
         }
         self.weights.fill(1.0);
@@ -798,4 +823,75 @@ fn edge_distance(valid: &[bool], width: usize, height: usize) -> Vec<f32> {
         }
     }
     d.into_iter().map(|v| v as f32 / 3.0).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The runs of samples interpolate each sample as its own cubic would, bit for
+    /// bit: the per-sample cubic between the four kept rows around its row, read from
+    /// the packed plane of kept rows (every lattice, both ends of the rows' range).
+    #[test]
+    fn runs_interpolate_every_sample_as_its_own_cubic() {
+        let root = test_support::workspace_root();
+        let camera = Camera::load_toml(root.join("fixtures/omni-320x240.toml")).unwrap();
+        let (w, h) = (camera.width() as usize, camera.height() as usize);
+        let mut frame = frame::Frame::for_camera(&camera);
+        for y in 0..h {
+            for x in 0..w {
+                let k = y * w + x;
+                if camera.valid_pixels()[k] {
+                    let (u, v) = (x as f32, y as f32);
+                    frame.intensity[k] = 0.5 + 0.3 * (u / 7.0 + (v / 11.0).sin()).sin();
+                    frame.range_m[k] = 3.0 + 0.05 * u + 0.02 * v;
+                    frame.status[k] = frame::PixelStatus::Hit;
+                }
+            }
+        }
+        for stride in [1, 2, 3] {
+            let options = PgmOptions {
+                stride,
+                parallel: false,
+                ..PgmOptions::default()
+            };
+            let mut pgm = Pgm::new(&camera, options).unwrap();
+            for lambda in [15.0f32, 40.0] {
+                pgm.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
+                let step = pgm.interpolation_step;
+                assert!(step > 1, "λ {lambda}: rows kept every {step}");
+                let [r0, r1] = pgm.window.rows;
+                let kept = recursive::kept_rows([r0, r1], step);
+                let regular = (r1 - 1 - r0) / step + 1;
+                let row = |j: usize| if j < regular { r0 + j * step } else { r1 - 1 } as f64;
+                let runs: u32 = pgm.interpolation.iter().map(|r| r.len).sum();
+                assert_eq!(runs as usize, pgm.samples.len());
+                for (i, &k) in pgm.samples.iter().enumerate() {
+                    let (x, y) = (k as usize % w, k as usize / w);
+                    let first = ((y - r0) / step).saturating_sub(1).min(kept - 4);
+                    let rows: [f64; 4] = std::array::from_fn(|i| row(first + i));
+                    let weights: [f32; 4] = std::array::from_fn(|i| {
+                        (0..4)
+                            .filter(|&m| m != i)
+                            .map(|m| (y as f64 - rows[m]) / (rows[i] - rows[m]))
+                            .product::<f64>() as f32
+                    });
+                    let p = |j: usize| pgm.lanes_t[(first + j) * w + x];
+                    let [a, b, c, d] = [p(0), p(1), p(2), p(3)];
+                    let expected: [f32; 6] = std::array::from_fn(|c_| {
+                        weights[0] * a[c_]
+                            + weights[1] * b[c_]
+                            + weights[2] * c[c_]
+                            + weights[3] * d[c_]
+                    });
+                    let bits = |v: [f32; 6]| v.map(f32::to_bits);
+                    assert_eq!(
+                        bits(pgm.interaction[i]),
+                        bits(expected),
+                        "stride {stride} λ {lambda} sample {i} at ({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
 }
