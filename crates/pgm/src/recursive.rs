@@ -24,11 +24,13 @@
 //! λ = 40; for comparison the exact correlation truncated at 4λ drops tails of 3.4e-4
 //! of the peak.
 //!
-//! Passes run down the columns of a row-major plane, with stripes of rows as vectors
-//! (interleaved channels are filtered together); the caller transposes the plane to
-//! filter along its rows. Precision: `f32` arithmetic, `f64` design. The loops run on
-//! the widest instruction set found at run time (AVX2 or AVX-512 on this project's
-//! machines, SSE2 on any x86-64), with the same bits on every one (tested).
+//! Passes run down the columns of a row-major plane, a block of two vectors of
+//! columns at a time whose recursion state stays in registers from the first row to
+//! the last (interleaved channels are filtered together); the caller transposes the
+//! plane to filter along its rows. Precision: `f32` arithmetic, `f64` design. The
+//! loops run on the widest instruction set found at run time (AVX2 or AVX-512 on this
+//! project's machines, SSE2 on any x86-64), with the same bits on every one, and the
+//! bits of the plain recursion of each column (tested).
 
 /// Pole pairs `(b, ω)` (units of `1/λ`) of the three sections of each kernel: found
 /// by minimising the fit's RMS error over the poles (Nelder–Mead on the continuous
@@ -289,12 +291,7 @@ impl Window {
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
     causal: Vec<f32>,
-    state: Vec<f32>,
 }
-
-/// Columns processed together by [`columns`]: the recursion's state of a stripe (two
-/// rows per section, 6 × 1 KB) stays in the L1 cache.
-const STRIPE: usize = 256;
 
 /// The coefficients of the three sections, as one value per lane role.
 #[derive(Clone, Copy)]
@@ -322,71 +319,92 @@ impl Coefficients {
     }
 }
 
-/// One sweep of the three sections down or up the rows `[r0, r1)` of the stripe
-/// `[x0, x0 + n)` (the input taken as zero before them), handing `emit(row, sums)`
-/// the sum of the sections' outputs at every row, row after row.
+/// Vectors per block of columns of a sweep: the block's state (two past outputs per
+/// section, two past inputs, the sums: 18 vectors) and the twelve coefficients fit
+/// in AVX-512's 32 registers.
+const BLOCK: usize = 2;
+
+/// The `f32` lanes `[v · lanes, (v + 1) · lanes)` of a block of `n` columns that are
+/// inside it (an empty range past `n`).
+#[inline(always)]
+fn lanes_of<S: pulp::Simd>(v: usize, n: usize) -> std::ops::Range<usize> {
+    let start = (v * S::F32_LANES).min(n);
+    start..((v + 1) * S::F32_LANES).min(n)
+}
+
+/// A vector from `part` (whole, or its first lanes and zeros: a masked load, slower
+/// on this project's machines, for a block's last columns only).
+#[inline(always)]
+fn load<S: pulp::Simd>(simd: S, part: &[f32]) -> S::f32s {
+    match S::as_simd_f32s(part) {
+        ([whole], []) => *whole,
+        _ => simd.partial_load_f32s(part),
+    }
+}
+
+/// `part` from a vector's first lanes (all if `part` holds a vector).
+#[inline(always)]
+fn store<S: pulp::Simd>(simd: S, part: &mut [f32], value: S::f32s) {
+    match S::as_mut_simd_f32s(part) {
+        ([whole], []) => *whole = value,
+        (_, part) => simd.partial_store_f32s(part, value),
+    }
+}
+
+/// One sweep of the three sections down or up the rows `[r0, r1)` of the block of
+/// columns `[x0, x0 + n)`, `n ≤ BLOCK · lanes` (the input taken as zero before them),
+/// handing `emit.row(y, sums)` the sum of the sections' outputs at every row, row
+/// after row. The block's state stays in registers for the whole sweep: each row
+/// reads its input and hands its sums, nothing else goes to memory. Lanes past `n`
+/// read zeros and are never written.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn sweep<E: Emit>(
+fn sweep<S: pulp::Simd, E: Emit<S>>(
+    simd: S,
     src: &[f32],
     width: usize,
     [r0, r1]: [usize; 2],
     [x0, n]: [usize; 2],
     c: Coefficients,
     down: bool,
-    scratch: &mut Scratch,
     emit: &mut E,
 ) {
-    // Two rows of past outputs per section: `older` (y[t − 2], receives y[t]) and
-    // `newer` (y[t − 1]), swapped every row; a row of zeros before the first; the
-    // row of sums.
-    let state = &mut scratch.state[..8 * n];
-    state.fill(0.0);
-    let (zero, state) = state.split_at_mut(n);
-    let (sum, state) = state.split_at_mut(n);
-    let (s0, rest) = state.split_at_mut(2 * n);
-    let (s1, s2) = rest.split_at_mut(2 * n);
-    let row = |t: usize| if down { r0 + t } else { r1 - 1 - t };
-    for t in 0..r1 - r0 {
-        let line = |back: usize| -> &[f32] {
-            if t >= back {
-                &src[row(t - back) * width + x0..][..n]
-            } else {
-                &zero[..n]
-            }
-        };
-        let (x1, x2) = (line(1), line(2));
-        let (o0, p0) = older_newer(s0, n, t);
-        let (o1, p1) = older_newer(s1, n, t);
-        let (o2, p2) = older_newer(s2, n, t);
-        let (o0, o1, o2, p0, p1, p2) = (
-            &mut o0[..n],
-            &mut o1[..n],
-            &mut o2[..n],
-            &p0[..n],
-            &p1[..n],
-            &p2[..n],
-        );
-        let sum = &mut sum[..n];
-        for j in 0..n {
-            let (a, b) = (x1[j], x2[j]);
-            let v0 = c.n1[0] * a + c.n2[0] * b - c.d1[0] * p0[j] - c.d2[0] * o0[j];
-            let v1 = c.n1[1] * a + c.n2[1] * b - c.d1[1] * p1[j] - c.d2[1] * o1[j];
-            let v2 = c.n1[2] * a + c.n2[2] * b - c.d1[2] * p2[j] - c.d2[2] * o2[j];
-            o0[j] = v0;
-            o1[j] = v1;
-            o2[j] = v2;
-            sum[j] = v0 + v1 + v2;
-        }
-        emit.row(row(t), sum);
+    let zero = simd.splat_f32s(0.0);
+    let (mut n1, mut n2, mut d1, mut d2) = ([zero; 3], [zero; 3], [zero; 3], [zero; 3]);
+    for i in 0..3 {
+        n1[i] = simd.splat_f32s(c.n1[i]);
+        n2[i] = simd.splat_f32s(c.n2[i]);
+        d1[i] = simd.splat_f32s(c.d1[i]);
+        d2[i] = simd.splat_f32s(c.d2[i]);
     }
-}
-
-/// The two state rows of a section at row `t` of a sweep: (older, newer).
-#[inline(always)]
-fn older_newer(s: &mut [f32], n: usize, t: usize) -> (&mut [f32], &mut [f32]) {
-    let (a, b) = s.split_at_mut(n);
-    if t.is_multiple_of(2) { (a, b) } else { (b, a) }
+    // Per section, `older` (y[t − 2]) and `newer` (y[t − 1]); the inputs x[t − 1],
+    // x[t − 2].
+    let mut older = [[zero; BLOCK]; 3];
+    let mut newer = [[zero; BLOCK]; 3];
+    let (mut x1, mut x2) = ([zero; BLOCK], [zero; BLOCK]);
+    for t in 0..r1 - r0 {
+        let y = if down { r0 + t } else { r1 - 1 - t };
+        let mut sums = [zero; BLOCK];
+        for v in 0..BLOCK {
+            let (a, b) = (x1[v], x2[v]);
+            let mut out = [zero; 3];
+            for i in 0..3 {
+                // n₁ a + n₂ b − d₁ y[t − 1] − d₂ y[t − 2], in this order.
+                let feed = simd.add_f32s(simd.mul_f32s(n1[i], a), simd.mul_f32s(n2[i], b));
+                let back = simd.sub_f32s(feed, simd.mul_f32s(d1[i], newer[i][v]));
+                out[i] = simd.sub_f32s(back, simd.mul_f32s(d2[i], older[i][v]));
+                older[i][v] = newer[i][v];
+                newer[i][v] = out[i];
+            }
+            sums[v] = simd.add_f32s(simd.add_f32s(out[0], out[1]), out[2]);
+        }
+        emit.row(y, sums);
+        x2 = x1;
+        let line = &src[y * width + x0..][..n];
+        for (v, x) in x1.iter_mut().enumerate() {
+            *x = load(simd, &line[lanes_of::<S>(v, n)]);
+        }
+    }
 }
 
 /// Correlate the columns of `window` in the row-major plane `src` (`width` elements
@@ -493,13 +511,19 @@ struct ColumnsOp<'a> {
 impl crate::simd::Kernel for ColumnsOp<'_> {
     #[inline(always)]
     fn run(self) {
-        columns_inline(self);
+        columns_inline(pulp::Scalar, self);
+    }
+
+    #[inline(always)]
+    fn run_on<S: pulp::Simd>(self, simd: S) {
+        columns_inline(simd, self);
     }
 }
 
-/// [`columns`] and [`columns_every`], inlined into each instruction set's copy.
+/// [`columns`] and [`columns_every`] in blocks of `BLOCK` vectors of columns,
+/// inlined into each instruction set's copy.
 #[inline(always)]
-fn columns_inline(op: ColumnsOp<'_>) {
+fn columns_inline<S: pulp::Simd>(simd: S, op: ColumnsOp<'_>) {
     let ColumnsOp {
         src,
         dst,
@@ -512,42 +536,33 @@ fn columns_inline(op: ColumnsOp<'_>) {
     } = op;
     let ([c0, c1], rows) = (window.columns, window.rows);
     let height = rows[1] - rows[0];
-    let n = STRIPE.min(c1 - c0);
-    scratch.state.resize(8 * n, 0.0);
+    let block = BLOCK * S::F32_LANES;
     let mut causal = std::mem::take(&mut scratch.causal);
-    causal.resize(height * n, 0.0);
+    causal.resize(height * block, 0.0);
     let (center, sigma) = (filter.center, filter.symmetry);
     let c = Coefficients::of(filter);
-    for x0 in (c0..c1).step_by(STRIPE) {
-        let n = STRIPE.min(c1 - x0);
+    for x0 in (c0..c1).step_by(block) {
+        let n = block.min(c1 - x0);
         let mut causal_rows = Causal {
+            simd,
             causal: &mut causal,
             first_row: rows[0],
-            n,
         };
-        sweep(
-            src,
-            width,
-            rows,
-            [x0, n],
-            c,
-            true,
-            scratch,
-            &mut causal_rows,
-        );
+        sweep(simd, src, width, rows, [x0, n], c, true, &mut causal_rows);
         let mut finish = Finish {
+            simd,
             src,
             dst: &mut *dst,
             width,
             rows,
-            stripe: [x0, n],
+            block: [x0, n],
             causal: &causal,
             center,
             sigma,
             mode,
             step,
         };
-        sweep(src, width, rows, [x0, n], c, false, scratch, &mut finish);
+        sweep(simd, src, width, rows, [x0, n], c, false, &mut finish);
     }
     scratch.causal = causal;
 }
@@ -555,35 +570,40 @@ fn columns_inline(op: ColumnsOp<'_>) {
 /// What a [`sweep`] does with the sums of each row: a struct with an
 /// `#[inline(always)]` method, not a closure (a closure that the compiler does not
 /// inline is compiled apart, without the instruction set of its caller).
-trait Emit {
-    /// The sections' sums at row `y`.
-    fn row(&mut self, y: usize, sums: &[f32]);
+trait Emit<S: pulp::Simd> {
+    /// The sections' sums at row `y`, a block's vectors.
+    fn row(&mut self, y: usize, sums: [S::f32s; BLOCK]);
 }
 
-/// The causal sweep's [`Emit`]: keep every row's sums.
-struct Causal<'a> {
+/// The causal sweep's [`Emit`]: keep every row's sums (whole vectors, `BLOCK`
+/// vectors a row).
+struct Causal<'a, S> {
+    simd: S,
     causal: &'a mut [f32],
     first_row: usize,
-    n: usize,
 }
 
-impl Emit for Causal<'_> {
+impl<S: pulp::Simd> Emit<S> for Causal<'_, S> {
     #[inline(always)]
-    fn row(&mut self, y: usize, sums: &[f32]) {
-        let (y, n) = (y - self.first_row, self.n);
-        self.causal[y * n..(y + 1) * n].copy_from_slice(sums);
+    fn row(&mut self, y: usize, sums: [S::f32s; BLOCK]) {
+        let (lanes, y) = (S::F32_LANES, y - self.first_row);
+        let row = &mut self.causal[y * BLOCK * lanes..][..BLOCK * lanes];
+        for (v, sum) in sums.into_iter().enumerate() {
+            store(self.simd, &mut row[v * lanes..(v + 1) * lanes], sum);
+        }
     }
 }
 
 /// The anticausal sweep's [`Emit`]: the output `K(0) src + anticausal + σ causal` of
-/// the stripe `[x0, x0 + n)` at each row written (every row in place if `step` is 1,
+/// the block of columns `[x0, x0 + n)` at each row written (every row in place if `step` is 1,
 /// else the kept rows packed: [`columns_every`]).
-struct Finish<'a> {
+struct Finish<'a, S> {
+    simd: S,
     src: &'a [f32],
     dst: &'a mut [f32],
     width: usize,
     rows: [usize; 2],
-    stripe: [usize; 2],
+    block: [usize; 2],
     causal: &'a [f32],
     center: f32,
     sigma: f32,
@@ -591,11 +611,11 @@ struct Finish<'a> {
     step: usize,
 }
 
-impl Emit for Finish<'_> {
+impl<S: pulp::Simd> Emit<S> for Finish<'_, S> {
     #[inline(always)]
-    fn row(&mut self, y: usize, a: &[f32]) {
-        let ([x0, n], step, width) = (self.stripe, self.step, self.width);
-        let (center, sigma) = (self.center, self.sigma);
+    fn row(&mut self, y: usize, a: [S::f32s; BLOCK]) {
+        let ([x0, n], step, width, simd) = (self.block, self.step, self.width, self.simd);
+        let lanes = S::F32_LANES;
         let yc = y - self.rows[0];
         // The destination row: the same, or the kept row's packed index.
         let out = if step == 1 {
@@ -607,23 +627,25 @@ impl Emit for Finish<'_> {
         } else {
             return;
         };
+        let (center, sigma) = (simd.splat_f32s(self.center), simd.splat_f32s(self.sigma));
         let (at, to) = (y * width + x0, out * width + x0);
-        let rows = self.dst[to..to + n]
-            .iter_mut()
-            .zip(&self.src[at..at + n])
-            .zip(&self.causal[yc * n..(yc + 1) * n])
-            .zip(a);
-        match self.mode {
-            Mode::Write => {
-                for (((o, &s), &c), &a) in rows {
-                    *o = center * s + a + sigma * c;
-                }
-            }
-            Mode::Add => {
-                for (((o, &s), &c), &a) in rows {
-                    *o += center * s + a + sigma * c;
-                }
-            }
+        let (src, dst) = (&self.src[at..at + n], &mut self.dst[to..to + n]);
+        let causal = &self.causal[yc * BLOCK * lanes..][..BLOCK * lanes];
+        for (v, a) in a.into_iter().enumerate() {
+            let part = lanes_of::<S>(v, n);
+            let s = load(simd, &src[part.clone()]);
+            let c = load(simd, &causal[v * lanes..(v + 1) * lanes]);
+            // K(0) s + a + σ c, in this order.
+            let value = simd.add_f32s(
+                simd.add_f32s(simd.mul_f32s(center, s), a),
+                simd.mul_f32s(sigma, c),
+            );
+            let o = &mut dst[part];
+            let value = match self.mode {
+                Mode::Write => value,
+                Mode::Add => simd.add_f32s(load(simd, o), value),
+            };
+            store(simd, o, value);
         }
     }
 }
@@ -694,7 +716,7 @@ mod tests {
 
     /// A column pass equals the impulse response applied as a correlation (zero
     /// padding), for every column and both modes, with interleaved widths that are not
-    /// multiples of the stripe.
+    /// multiples of the block.
     #[test]
     fn column_pass_is_the_correlation_of_the_impulse_response() {
         let (width, height) = (300, 37);
@@ -727,6 +749,98 @@ mod tests {
                         (got - expected).abs() < 1e-5 * (1.0 + expected.abs()),
                         "{shape:?} ({x}, {y}): {got} vs {expected}"
                     );
+                }
+            }
+        }
+    }
+
+    /// The plain recursion of one column, element by element, with the blocked
+    /// passes' operations in their order: causal and anticausal sums of the three
+    /// sections from zero states, then `K(0) x + a + σ c`.
+    fn plain_column(filter: &Recursive, x: &[f32]) -> Vec<f32> {
+        let c = Coefficients::of(filter);
+        let sweep = |x: &[f32]| -> Vec<f32> {
+            let (mut older, mut newer, mut out) = ([0.0f32; 3], [0.0f32; 3], vec![]);
+            for t in 0..x.len() {
+                let a = if t >= 1 { x[t - 1] } else { 0.0 };
+                let b = if t >= 2 { x[t - 2] } else { 0.0 };
+                let mut v = [0.0f32; 3];
+                for i in 0..3 {
+                    v[i] = c.n1[i] * a + c.n2[i] * b - c.d1[i] * newer[i] - c.d2[i] * older[i];
+                    older[i] = newer[i];
+                    newer[i] = v[i];
+                }
+                out.push(v[0] + v[1] + v[2]);
+            }
+            out
+        };
+        let causal = sweep(x);
+        let reversed: Vec<f32> = x.iter().rev().copied().collect();
+        let mut anticausal = sweep(&reversed);
+        anticausal.reverse();
+        (0..x.len())
+            .map(|t| filter.center * x[t] + anticausal[t] + filter.symmetry * causal[t])
+            .collect()
+    }
+
+    /// The blocked passes (the widest instruction set's vectors, and one lane at a
+    /// time) give, bit for bit, the plain recursion of each column inside the
+    /// window, for every kernel, both modes, blocks cut short at the window's edge,
+    /// and leave the rest of the destination as it was.
+    #[test]
+    fn blocked_passes_are_the_plain_recursion_of_each_column() {
+        for (width, height, window) in [
+            (
+                6 * 53,
+                41,
+                Window {
+                    columns: [6, 6 * 53 - 12],
+                    rows: [2, 40],
+                },
+            ),
+            (37, 9, Window::whole(37, 9)),
+            (
+                70,
+                3,
+                Window {
+                    columns: [33, 34],
+                    rows: [0, 3],
+                },
+            ),
+        ] {
+            let src: Vec<f32> = (0..width * height)
+                .map(|k| ((k * 7919) % 1000) as f32 / 1000.0 - 0.3)
+                .collect();
+            for shape in [Shape::Gaussian, Shape::SquaredOffset, Shape::Derivative] {
+                let filter = Recursive::new(shape, 2.9);
+                for mode in [Mode::Write, Mode::Add] {
+                    let before = vec![0.25f32; width * height];
+                    let mut expected = before.clone();
+                    let [r0, r1] = window.rows;
+                    for x in window.columns[0]..window.columns[1] {
+                        let column: Vec<f32> = (r0..r1).map(|y| src[y * width + x]).collect();
+                        for (y, v) in (r0..r1).zip(plain_column(&filter, &column)) {
+                            let e = &mut expected[y * width + x];
+                            *e = if mode == Mode::Add { *e + v } else { v };
+                        }
+                    }
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    let mut fast = before.clone();
+                    let mut sc = Scratch::default();
+                    columns(&src, &mut fast, width, window, &filter, mode, &mut sc);
+                    assert_eq!(bits(&fast), bits(&expected), "{width} {shape:?} {mode:?}");
+                    let mut scalar = before.clone();
+                    crate::simd::on_scalar(ColumnsOp {
+                        src: &src,
+                        dst: &mut scalar,
+                        width,
+                        window,
+                        filter: &filter,
+                        mode,
+                        step: 1,
+                        scratch: &mut sc,
+                    });
+                    assert_eq!(bits(&scalar), bits(&expected), "{width} {shape:?} {mode:?}");
                 }
             }
         }

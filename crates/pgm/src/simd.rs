@@ -10,9 +10,17 @@
 
 /// A loop nest to run on the widest instruction set; implement `run` with
 /// `#[inline(always)]`.
-pub(crate) trait Kernel {
+pub(crate) trait Kernel: Sized {
     /// Run it.
     fn run(self);
+
+    /// Run it on the instruction set `simd` (a kernel written with `S`'s vectors
+    /// overrides it).
+    #[inline(always)]
+    fn run_on<S: pulp::Simd>(self, simd: S) {
+        let _ = simd;
+        self.run();
+    }
 }
 
 /// Run `kernel` on the widest instruction set the CPU has.
@@ -32,7 +40,7 @@ impl<K: Kernel> pulp::WithSimd for Widest<K> {
     type Output = ();
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.0.run();
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        self.0.run_on(simd);
     }
 }
