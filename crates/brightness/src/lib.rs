@@ -10,4 +10,4 @@ mod photometric;
 pub use error::BrightnessError;
 pub use feature::Brightness;
 pub use gradient::masked_gradient;
-pub use normal::normal_equations;
+pub use normal::{normal_equations, normal_equations_with_column};

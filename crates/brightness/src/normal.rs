@@ -20,12 +20,115 @@ pub fn normal_equations<const N: usize>(
     residuals: &[f32],
     weights: Option<&[f32]>,
 ) -> ([[f64; N]; N], [f64; N]) {
+    run(Plain(rows), residuals, weights)
+}
+
+/// [`normal_equations`] of the rows `[j[k] | column[k]]` (`M = N + 1` columns: the
+/// rows of a feature and one more column, such as the PGM's `J_λ`), without copying
+/// them into rows of `M`: the same bits as [`normal_equations`]`::<M>` of the joined
+/// rows (tested).
+///
+/// # Panics
+/// If `M ≠ N + 1` or the slices differ in length (callers check).
+pub fn normal_equations_with_column<const N: usize, const M: usize>(
+    rows: &[[f32; N]],
+    column: &[f32],
+    residuals: &[f32],
+    weights: Option<&[f32]>,
+) -> ([[f64; M]; M], [f64; M]) {
+    assert_eq!(M, N + 1, "one more column");
+    assert_eq!(column.len(), rows.len());
+    run(WithColumn { rows, column }, residuals, weights)
+}
+
+/// Where the rows of `M` columns come from.
+trait Rows<const M: usize>: Copy {
+    /// Number of rows.
+    fn len(&self) -> usize;
+
+    /// Row `k`.
+    fn row(&self, k: usize) -> [f32; M];
+
+    /// Row `k` in the first `M` lanes of a vector (anything beyond).
+    #[cfg(target_arch = "x86_64")]
+    fn lanes(&self, simd: pulp::x86::V4, k: usize) -> core::arch::x86_64::__m512;
+}
+
+/// Rows as they are.
+#[derive(Clone, Copy)]
+struct Plain<'a, const M: usize>(&'a [[f32; M]]);
+
+impl<const M: usize> Rows<M> for Plain<'_, M> {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    #[inline(always)]
+    fn row(&self, k: usize) -> [f32; M] {
+        self.0[k]
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn lanes(&self, _: pulp::x86::V4, k: usize) -> core::arch::x86_64::__m512 {
+        // The row then the next rows' values, or the last rows padded.
+        match self.0.as_flattened().get(k * M..k * M + 16) {
+            Some(s) => pulp::cast(*<&[f32; 16]>::try_from(s).expect("16")),
+            None => {
+                let mut padded = [0.0f32; 16];
+                padded[..M].copy_from_slice(&self.0[k]);
+                pulp::cast(padded)
+            }
+        }
+    }
+}
+
+/// Rows of `M − 1` columns and one more column.
+#[derive(Clone, Copy)]
+struct WithColumn<'a, const N: usize> {
+    rows: &'a [[f32; N]],
+    column: &'a [f32],
+}
+
+impl<const N: usize, const M: usize> Rows<M> for WithColumn<'_, N> {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    #[inline(always)]
+    fn row(&self, k: usize) -> [f32; M] {
+        std::array::from_fn(|c| {
+            if c < N {
+                self.rows[k][c]
+            } else {
+                self.column[k]
+            }
+        })
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn lanes(&self, simd: pulp::x86::V4, k: usize) -> core::arch::x86_64::__m512 {
+        let row: core::arch::x86_64::__m512 = Plain(self.rows).lanes(simd, k);
+        let f = simd.avx512f;
+        f._mm512_mask_blend_ps(1 << N, row, f._mm512_set1_ps(self.column[k]))
+    }
+}
+
+/// [`normal_equations`] of any rows: the AVX-512 kernel where the processor has it.
+fn run<const M: usize>(
+    rows: impl Rows<M>,
+    residuals: &[f32],
+    weights: Option<&[f32]>,
+) -> ([[f64; M]; M], [f64; M]) {
     assert_eq!(rows.len(), residuals.len());
     if let Some(w) = weights {
         assert_eq!(w.len(), rows.len());
     }
     #[cfg(target_arch = "x86_64")]
-    if N <= avx512::MAX_COLUMNS
+    if M <= avx512::MAX_COLUMNS
         && let Some(simd) = pulp::x86::V4::try_new()
     {
         return pulp::Simd::vectorize(
@@ -43,16 +146,17 @@ pub fn normal_equations<const N: usize>(
 
 /// The plain loops (the reference of the vector kernel, and its fallback).
 fn scalar<const N: usize>(
-    rows: &[[f32; N]],
+    rows: impl Rows<N>,
     residuals: &[f32],
     weights: Option<&[f32]>,
 ) -> ([[f64; N]; N], [f64; N]) {
     let mut sums = Sums::<N>::default();
-    for (b, chunk) in rows.chunks(BLOCK).enumerate() {
+    let m = rows.len();
+    for b in 0..m.div_ceil(BLOCK) {
         let mut block = [[0.0f32; N]; N];
         let mut block_e = [0.0f32; N];
-        for (k, row) in chunk.iter().enumerate() {
-            let index = b * BLOCK + k;
+        for index in b * BLOCK..((b + 1) * BLOCK).min(m) {
+            let row = rows.row(index);
             let w = weights.map_or(1.0, |w| w[index]);
             if w == 0.0 {
                 continue;
@@ -118,7 +222,7 @@ mod avx512 {
 
     use pulp::x86::V4;
 
-    use super::{BLOCK, Sums};
+    use super::{BLOCK, Rows, Sums};
 
     /// Vectors of sums.
     const VECTORS: usize = 4;
@@ -172,14 +276,14 @@ mod avx512 {
     }
 
     /// The arguments of [`super::normal_equations`], run compiled for AVX-512.
-    pub(super) struct Normal<'a, const N: usize> {
+    pub(super) struct Normal<'a, R, const N: usize> {
         pub(super) simd: V4,
-        pub(super) rows: &'a [[f32; N]],
+        pub(super) rows: R,
         pub(super) residuals: &'a [f32],
         pub(super) weights: Option<&'a [f32]>,
     }
 
-    impl<const N: usize> pulp::WithSimd for Normal<'_, N> {
+    impl<const N: usize, R: Rows<N>> pulp::WithSimd for Normal<'_, R, N> {
         type Output = ([[f64; N]; N], [f64; N]);
 
         #[inline(always)]
@@ -188,31 +292,24 @@ mod avx512 {
         }
     }
 
-    impl<const N: usize> Normal<'_, N> {
+    impl<const N: usize, R: Rows<N>> Normal<'_, R, N> {
         #[inline(always)]
         fn run(self) -> ([[f64; N]; N], [f64; N]) {
             let lanes = const { lanes(N) };
             let vectors = lanes.count.div_ceil(16);
             let f = self.simd.avx512f;
-            let flat = self.rows.as_flattened();
             let mut sums = Sums::<N>::default();
-            for (b, chunk) in self.rows.chunks(BLOCK).enumerate() {
+            let m = self.rows.len();
+            for b in 0..m.div_ceil(BLOCK) {
                 let mut acc = [f._mm512_setzero_ps(); VECTORS];
-                for k in b * BLOCK..b * BLOCK + chunk.len() {
+                for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
                     let w = self.weights.map_or(1.0, |w| w[k]);
                     if w == 0.0 {
                         continue;
                     }
                     let e = self.residuals[k] * w;
-                    // The row in the first N lanes (the next rows' values beyond).
-                    let row: __m512 = match flat.get(k * N..k * N + 16) {
-                        Some(s) => pulp::cast(*<&[f32; 16]>::try_from(s).expect("16")),
-                        None => {
-                            let mut padded = [0.0f32; 16];
-                            padded[..N].copy_from_slice(&self.rows[k]);
-                            pulp::cast(padded)
-                        }
-                    };
+                    // The row in the first N lanes.
+                    let row: __m512 = self.rows.lanes(self.simd, k);
                     let weighted = f._mm512_mul_ps(row, f._mm512_set1_ps(w));
                     let e = f._mm512_set1_ps(e);
                     for (v, acc) in acc.iter_mut().enumerate().take(vectors) {
@@ -262,7 +359,7 @@ mod tests {
         let w = &weights[..m];
         for weights in [None, Some(w)] {
             let fast = normal_equations::<N>(&rows, &residuals, weights);
-            let reference = scalar::<N>(&rows, &residuals, weights);
+            let reference = scalar::<N>(Plain(&rows), &residuals, weights);
             assert_eq!(bits(fast), bits(reference), "N = {N}, {m} rows");
         }
     }
@@ -280,6 +377,31 @@ mod tests {
             same_bits::<7>(&values[..values.len().min(8 * 600)], &weights);
             same_bits::<9>(&values[..values.len().min(10 * 600)], &weights);
             same_bits::<2>(&values[..values.len().min(3 * 600)], &weights);
+        }
+
+        /// Rows and one more column give the bits of the joined rows, on the kernel of
+        /// the processor and in the plain loops.
+        #[test]
+        fn one_more_column_gives_the_bits_of_the_joined_rows(
+            values in prop::collection::vec(-1e3f32..1e3, 0..4800),
+            weights in prop::collection::vec(
+                prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..2.0], 600),
+        ) {
+            let m = values.len() / 8;
+            let rows: Vec<[f32; 6]> =
+                (0..m).map(|k| std::array::from_fn(|c| values[8 * k + c])).collect();
+            let column: Vec<f32> = (0..m).map(|k| values[8 * k + 6]).collect();
+            let residuals: Vec<f32> = (0..m).map(|k| values[8 * k + 7]).collect();
+            let joined: Vec<[f32; 7]> = (0..m)
+                .map(|k| std::array::from_fn(|c| if c < 6 { rows[k][c] } else { column[k] }))
+                .collect();
+            for weights in [None, Some(&weights[..m])] {
+                let expected = bits(normal_equations::<7>(&joined, &residuals, weights));
+                let got = normal_equations_with_column::<6, 7>(&rows, &column, &residuals, weights);
+                prop_assert_eq!(bits(got), expected.clone());
+                let plain = scalar::<7>(WithColumn { rows: &rows, column: &column }, &residuals, weights);
+                prop_assert_eq!(bits(plain), expected);
+            }
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use brightness::{Brightness, normal_equations};
+use brightness::{Brightness, normal_equations, normal_equations_with_column};
 use frame::{AnyImage, Frame, Image};
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
@@ -118,7 +118,6 @@ pub struct Servo<'a> {
     costs: Vec<f64>,
     residuals: Vec<f32>,
     weights: Vec<f32>,
-    rows7: Vec<[f32; 7]>,
     scratch: Vec<f32>,
     search_desired: Vec<f32>,
     search_weights: Vec<f32>,
@@ -155,7 +154,6 @@ impl<'a> Servo<'a> {
             costs: Vec::new(),
             residuals: Vec::new(),
             weights: Vec::new(),
-            rows7: Vec::new(),
             scratch: Vec::new(),
             search_desired: Vec::new(),
             search_weights: Vec::new(),
@@ -943,15 +941,13 @@ impl<'a> Servo<'a> {
                     })
                 }
                 Stage::Pgm { .. } if optimise_lambda => {
-                    self.rows7.clear();
-                    self.rows7.extend(
-                        pgm.interaction()
-                            .iter()
-                            .zip(pgm.j_lambda())
-                            .map(|(l, &j)| [l[0], l[1], l[2], l[3], l[4], l[5], j]),
+                    // [L_G | J_λ], without joining them into rows of 7.
+                    let (jtj, jte) = normal_equations_with_column::<6, 7>(
+                        pgm.interaction(),
+                        pgm.j_lambda(),
+                        &self.residuals,
+                        Some(&self.weights),
                     );
-                    let (jtj, jte) =
-                        normal_equations::<7>(&self.rows7, &self.residuals, Some(&self.weights));
                     solve(&jtj, &jte, eta).map(|x| ([x[0], x[1], x[2], x[3], x[4], x[5]], x[6]))
                 }
                 _ => {
