@@ -56,7 +56,10 @@
 //! The points 512 ahead in the draw list are prefetched, a few cache lines per block
 //! (cells are drawn front to back, not in memory order). Single-pixel splats (most of
 //! them) skip the square loops, and the single-threaded passes take minima and add
-//! samples without a branch (whether a point is nearer is unpredictable). Each point's
+//! samples without a branch (whether a point is nearer is unpredictable), on the
+//! buffers as plain integers (the threads of a parallel pass share them as atomics):
+//! there, on AVX-512, a 3 × 3 splat (most of the others) takes its minima, and adds
+//! its samples, a row of three pixels per instruction. Each point's
 //! splat is bit for bit the one of the scalar reference (tested, both kernels). A
 //! splat whose every pixel already holds a range below its depth band when pass 1
 //! reaches it is dropped there (pass 2 would reject it everywhere, since depths only
@@ -80,6 +83,7 @@ mod avx2;
 mod avx512;
 #[cfg(target_arch = "x86_64")]
 mod lanes;
+mod plain;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 mod sse2;
 
@@ -553,7 +557,7 @@ impl Renderer {
                 cells,
                 &view,
                 &self.camera,
-                &self.depth,
+                &mut self.depth,
                 splats,
                 parallel,
             );
@@ -563,9 +567,10 @@ impl Renderer {
         if parallel {
             splats
                 .par_chunks(16_384)
-                .for_each(|splats| accumulate(splats, &view, &self.depth, &self.accum, true));
+                .for_each(|splats| accumulate(splats, &view, &self.depth, &self.accum));
         } else {
-            accumulate(splats, &view, &self.depth, &self.accum, false);
+            let depth = plain::depths(&mut self.depth);
+            widest_pass_two(splats, &view, depth, plain::sums(&mut self.accum));
         }
 
         // Resolve.
@@ -967,13 +972,15 @@ fn draw_depth(
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: &[AtomicU32],
+    depth: &mut [AtomicU32],
     splats: &mut [Splat],
     parallel: bool,
 ) -> usize {
     if !parallel {
-        return widest_pass_one(points, cells, view, camera, depth, splats, false);
+        let depth = Depths::Own(plain::depths(depth));
+        return widest_pass_one(points, cells, view, camera, depth, splats);
     }
+    let depth = &*depth;
     let total = splats.len();
     let chunks = chunk_cells(cells, 16_384);
     let mut slices = Vec::with_capacity(chunks.len());
@@ -985,7 +992,7 @@ fn draw_depth(
         rest = tail;
     }
     slices.par_iter_mut().for_each(|(cells, splats)| {
-        let kept = widest_pass_one(points, cells, view, camera, depth, splats, true);
+        let kept = widest_pass_one(points, cells, view, camera, Depths::Shared(depth), splats);
         for s in &mut splats[kept..] {
             *s = Splat::not_drawn();
         }
@@ -1227,6 +1234,50 @@ trait Project: Copy {
 
     /// The splats of fewer than [`BLOCK`] points (a cell's last ones), as many as `out`.
     fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]);
+
+    /// Pass 1 of a 3 × 3 splat on plain keys ([`splat_depth_3x3`]); the plain loop
+    /// unless the instruction set does it whole rows at a time.
+    #[inline(always)]
+    fn depth_3x3(
+        self,
+        depth: &mut [u32],
+        first: usize,
+        width: usize,
+        key: u32,
+        limit: f32,
+    ) -> bool {
+        let mut hidden = true;
+        for row in [first, first + width, first + 2 * width] {
+            for before in &mut depth[row..row + 3] {
+                hidden &= f32::from_bits(*before) < limit;
+                *before = key.min(*before);
+            }
+        }
+        !hidden
+    }
+
+    /// Pass 2 of a 3 × 3 splat on plain sums ([`accumulate_own`]); the plain loop
+    /// unless the instruction set does it whole rows at a time.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn accumulate_3x3(
+        self,
+        depth: &[u32],
+        accum: &mut [[u64; 2]],
+        first: usize,
+        width: usize,
+        limit: f32,
+        sample: u64,
+        range_sample: u64,
+    ) {
+        for row in [first, first + width, first + 2 * width] {
+            for k in row..row + 3 {
+                let keep = u64::from(f32::from_bits(depth[k]) >= limit);
+                accum[k][0] += sample * keep;
+                accum[k][1] += range_sample * keep;
+            }
+        }
+    }
 }
 
 /// The splats of `points` (as many as `out`) by blocks of `T` points, the last one
@@ -1299,6 +1350,41 @@ impl Project for Avx512 {
     fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<16>(self, points, footprint, view, out);
     }
+
+    #[inline(always)]
+    fn depth_3x3(
+        self,
+        depth: &mut [u32],
+        first: usize,
+        width: usize,
+        key: u32,
+        limit: f32,
+    ) -> bool {
+        avx512::depth_3x3(self.0, depth, first, width, key, limit)
+    }
+
+    #[inline(always)]
+    fn accumulate_3x3(
+        self,
+        depth: &[u32],
+        accum: &mut [[u64; 2]],
+        first: usize,
+        width: usize,
+        limit: f32,
+        sample: u64,
+        range_sample: u64,
+    ) {
+        avx512::accumulate_3x3(
+            self.0,
+            depth,
+            accum,
+            first,
+            width,
+            limit,
+            sample,
+            range_sample,
+        );
+    }
 }
 
 /// Eight points per instruction where the processor has AVX2 but not AVX-512
@@ -1333,9 +1419,8 @@ struct PassOneArgs<'a> {
     cells: &'a [DrawCell],
     view: &'a View,
     camera: &'a Camera,
-    depth: &'a [AtomicU32],
+    depth: Depths<'a>,
     splats: &'a mut [Splat],
-    atomic: bool,
 }
 
 impl PassOneArgs<'_> {
@@ -1343,9 +1428,16 @@ impl PassOneArgs<'_> {
     fn run(self, projector: impl Project) -> usize {
         let a = self;
         project_and_depth(
-            a.points, a.cells, a.view, a.camera, a.depth, a.splats, a.atomic, projector,
+            a.points, a.cells, a.view, a.camera, a.depth, a.splats, projector,
         )
     }
+}
+
+/// The depth buffer as pass 1 writes it: shared by the threads of a parallel pass
+/// (atomic minima), or held by one thread (plain keys, several pixels at a time).
+enum Depths<'a> {
+    Shared(&'a [AtomicU32]),
+    Own(&'a mut [u32]),
 }
 
 /// [`project_and_depth`] with a projector, to run compiled for its instruction set
@@ -1369,9 +1461,8 @@ fn widest_pass_one(
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: &[AtomicU32],
+    depth: Depths<'_>,
     splats: &mut [Splat],
-    atomic: bool,
 ) -> usize {
     let args = PassOneArgs {
         points,
@@ -1380,7 +1471,6 @@ fn widest_pass_one(
         camera,
         depth,
         splats,
-        atomic,
     };
     #[cfg(target_arch = "x86_64")]
     {
@@ -1465,6 +1555,21 @@ fn project_lanes_portable<const N: usize>(
 }
 
 impl Splat {
+    /// The top-left pixel of a 3 × 3 splat inside the image whose rows can be read
+    /// four pixels at a time from a buffer of `len` pixels (every 3 × 3 splat but at
+    /// the buffer's last pixels).
+    #[inline(always)]
+    fn whole_3x3(&self, view: &View, len: usize) -> Option<usize> {
+        let (iu, iv) = (self.iu(), self.iv());
+        let inside = self.width() == 3
+            && iu >= 0
+            && iv >= 0
+            && iu + 3 <= view.width
+            && iv + 3 <= view.height;
+        let first = iv as usize * view.width as usize + iu as usize;
+        (inside && first + 2 * view.width as usize + 4 <= len).then_some(first)
+    }
+
     /// Call `f` with the index of every pixel the splat covers, clipped to the image
     /// (a drawn splat: `width != NOT_DRAWN`, so it reaches the image).
     #[inline(always)]
@@ -1502,23 +1607,28 @@ impl Splat {
 /// already held a range below its band (depths only decrease, so pass 2 would reject
 /// it everywhere; the test is pass 2's own, on a depth at least the final one).
 #[inline(always)]
-fn splat_depth(s: &Splat, view: &View, depth: &[AtomicU32], atomic: bool) -> bool {
+fn splat_depth(s: &Splat, view: &View, depth: &mut Depths<'_>, projector: impl Project) -> bool {
     let key = s.0[2];
     let limit = s.limit_m();
     let mut hidden = true;
-    s.for_each_pixel(view, |k| {
-        let cell = &depth[k];
-        let before = if atomic {
-            cell.fetch_min(key, Ordering::Relaxed)
-        } else {
-            // Branch-free: whether a point is nearer is unpredictable.
-            let before = cell.load(Ordering::Relaxed);
-            cell.store(key.min(before), Ordering::Relaxed);
-            before
-        };
-        // An empty pixel's key is a NaN: never below the limit.
-        hidden &= f32::from_bits(before) < limit;
-    });
+    match depth {
+        Depths::Shared(depth) => s.for_each_pixel(view, |k| {
+            let before = depth[k].fetch_min(key, Ordering::Relaxed);
+            // An empty pixel's key is a NaN: never below the limit.
+            hidden &= f32::from_bits(before) < limit;
+        }),
+        Depths::Own(depth) => {
+            if let Some(first) = s.whole_3x3(view, depth.len()) {
+                return projector.depth_3x3(depth, first, view.width as usize, key, limit);
+            }
+            s.for_each_pixel(view, |k| {
+                // Branch-free: whether a point is nearer is unpredictable.
+                let before = depth[k];
+                depth[k] = key.min(before);
+                hidden &= f32::from_bits(before) < limit;
+            });
+        }
+    }
     !hidden
 }
 
@@ -1538,9 +1648,8 @@ fn project_and_depth(
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: &[AtomicU32],
+    mut depth: Depths<'_>,
     splats: &mut [Splat],
-    atomic: bool,
     projector: impl Project,
 ) -> usize {
     let mut kept = 0;
@@ -1581,7 +1690,7 @@ fn project_and_depth(
             // Keep the splats that may add a sample (`kept` never passes the number of
             // points read, so its slot exists).
             for s in out.iter().filter(|s| s.drawn()) {
-                let visible = splat_depth(s, view, depth, atomic);
+                let visible = splat_depth(s, view, &mut depth, projector);
                 splats[kept] = *s;
                 kept += usize::from(visible);
             }
@@ -1671,43 +1780,118 @@ impl<'a> Warm<'a> {
     }
 }
 
-/// Pass 2 over the splats of pass 1: add each sample to the pixels it covers where it
-/// lies within the depth band of the nearest.
+/// A splat's two samples: its intensity (16-bit fixed point, above a count of one)
+/// and its range (fixed point).
 #[inline(always)]
-fn accumulate(
-    splats: &[Splat],
-    view: &View,
-    depth: &[AtomicU32],
-    accum: &[[AtomicU64; 2]],
-    atomic: bool,
-) {
+fn samples(s: &Splat) -> (u64, u64) {
+    let sample = (u64::from(s.intensity()) << COUNT_BITS) | 1;
+    // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
+    let range_sample = (s.range_m() * RANGE_SCALE + 0.5) as i64 as u64;
+    (sample, range_sample)
+}
+
+/// Pass 2 over the splats of pass 1, shared by the threads of a parallel pass: add
+/// each sample to the pixels it covers where it lies within the depth band of the
+/// nearest.
+#[inline(always)]
+fn accumulate(splats: &[Splat], view: &View, depth: &[AtomicU32], accum: &[[AtomicU64; 2]]) {
     for s in splats.iter().filter(|s| s.drawn()) {
-        let sample = (u64::from(s.intensity()) << COUNT_BITS) | 1;
-        // Through i64: the same for any range below 2^51 m, and cheaper than to u64.
-        let range_sample = (s.range_m() * RANGE_SCALE + 0.5) as i64 as u64;
+        let (sample, range_sample) = samples(s);
         let limit = s.limit_m();
         s.for_each_pixel(view, |k| {
-            let near = f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit;
-            let [slot, range] = &accum[k];
-            if atomic {
-                if near {
-                    slot.fetch_add(sample, Ordering::Relaxed);
-                    range.fetch_add(range_sample, Ordering::Relaxed);
-                }
-            } else {
-                // Branch-free: whether a sample is within the band is unpredictable.
-                let keep = u64::from(near);
-                slot.store(
-                    slot.load(Ordering::Relaxed) + sample * keep,
-                    Ordering::Relaxed,
-                );
-                range.store(
-                    range.load(Ordering::Relaxed) + range_sample * keep,
-                    Ordering::Relaxed,
-                );
+            if f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit {
+                let [slot, range] = &accum[k];
+                slot.fetch_add(sample, Ordering::Relaxed);
+                range.fetch_add(range_sample, Ordering::Relaxed);
             }
         });
     }
+}
+
+/// [`accumulate`] on one thread, on plain keys and sums: 3 × 3 splats whole rows at a
+/// time where the instruction set allows ([`Project::accumulate_3x3`]), the others
+/// without a branch (whether a sample is within the band is unpredictable).
+#[inline(always)]
+fn accumulate_own(
+    splats: &[Splat],
+    view: &View,
+    depth: &[u32],
+    accum: &mut [[u64; 2]],
+    projector: impl Project,
+) {
+    for s in splats.iter().filter(|s| s.drawn()) {
+        let (sample, range_sample) = samples(s);
+        let limit = s.limit_m();
+        if let Some(first) = s.whole_3x3(view, depth.len()) {
+            let width = view.width as usize;
+            projector.accumulate_3x3(depth, accum, first, width, limit, sample, range_sample);
+            continue;
+        }
+        s.for_each_pixel(view, |k| {
+            let keep = 0u64.wrapping_sub(u64::from(f32::from_bits(depth[k]) >= limit));
+            let sums = &mut accum[k];
+            *sums = [sums[0] + (sample & keep), sums[1] + (range_sample & keep)];
+        });
+    }
+}
+
+/// The arguments of [`accumulate_own`] with a projector (its instruction set), to run
+/// compiled for it.
+struct PassTwo<'a, P> {
+    splats: &'a [Splat],
+    view: &'a View,
+    depth: &'a [u32],
+    accum: &'a mut [[u64; 2]],
+    projector: P,
+}
+
+impl<P: Project> pulp::WithSimd for PassTwo<'_, P> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        accumulate_own(
+            self.splats,
+            self.view,
+            self.depth,
+            self.accum,
+            self.projector,
+        );
+    }
+}
+
+/// [`accumulate_own`] on the widest instruction set found at run time.
+fn widest_pass_two(splats: &[Splat], view: &View, depth: &[u32], accum: &mut [[u64; 2]]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if let Some(simd) = pulp::x86::V4::try_new() {
+            let projector = Avx512(simd);
+            return pulp::Simd::vectorize(
+                simd,
+                PassTwo {
+                    splats,
+                    view,
+                    depth,
+                    accum,
+                    projector,
+                },
+            );
+        }
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            let projector = Avx2(simd);
+            return pulp::Simd::vectorize(
+                simd,
+                PassTwo {
+                    splats,
+                    view,
+                    depth,
+                    accum,
+                    projector,
+                },
+            );
+        }
+    }
+    accumulate_own(splats, view, depth, accum, Baseline);
 }
 
 #[cfg(test)]
@@ -1927,7 +2111,92 @@ mod tests {
         })
     }
 
+    /// A key for the 3 × 3 kernels' tests: empty (a NaN), or a range in metres whose
+    /// bits are near `limit`'s (so that both sides of every comparison occur).
+    fn key_near(choice: u8, offset: i32, limit: f32) -> u32 {
+        match choice {
+            0 => EMPTY,
+            _ => (limit.to_bits() as i64 + i64::from(offset)).clamp(0, 0x7F7F_FFFF) as u32,
+        }
+    }
+
+    /// Both 3 × 3 kernels of a projector against the baseline's plain loops on
+    /// copies of the same buffers: the same keys, sums and result.
+    #[allow(clippy::too_many_arguments)]
+    fn same_3x3(
+        projector: impl Project,
+        depth: &[u32],
+        accum: &[[u64; 2]],
+        first: usize,
+        width: usize,
+        key: u32,
+        limit: f32,
+        samples: (u64, u64),
+    ) -> Result<(), TestCaseError> {
+        let (mut fast, mut plain) = (depth.to_vec(), depth.to_vec());
+        let seen = projector.depth_3x3(&mut fast, first, width, key, limit);
+        let expected = Baseline.depth_3x3(&mut plain, first, width, key, limit);
+        prop_assert_eq!(seen, expected);
+        prop_assert_eq!(&fast, &plain);
+        let (mut fast, mut plain) = (accum.to_vec(), accum.to_vec());
+        let (a, b) = samples;
+        projector.accumulate_3x3(depth, &mut fast, first, width, limit, a, b);
+        Baseline.accumulate_3x3(depth, &mut plain, first, width, limit, a, b);
+        prop_assert_eq!(fast, plain);
+        Ok(())
+    }
+
     proptest! {
+        /// The plain loops of the 3 × 3 kernels are the per-pixel passes: each pixel
+        /// takes the minimum key, the splat is seen if a pixel held a key not below the
+        /// limit (or none), and each pixel at least the limit adds both samples; the
+        /// AVX-512 kernels (where the processor has them) give the same buffers, the
+        /// fourth pixel of each row and every other pixel untouched.
+        #[test]
+        fn kernels_3x3_are_the_per_pixel_passes(
+            width in 4usize..24,
+            rows in 3usize..8,
+            cells in prop::collection::vec((0u8..4, -3i32..4, any::<u16>(), any::<u16>()), 24 * 8),
+            at in any::<prop::sample::Index>(),
+            key in (0u8..4, -3i32..4),
+            limit in 0.5f32..50.0,
+            sample in any::<(u32, u32)>(),
+        ) {
+            let len = width * rows;
+            let depth: Vec<u32> = cells[..len].iter().map(|&(c, o, _, _)| key_near(c, o, limit)).collect();
+            let accum: Vec<[u64; 2]> = cells[..len]
+                .iter()
+                .map(|&(_, _, a, b)| [u64::from(a) << 20, u64::from(b) << 8])
+                .collect();
+            // Any top-left pixel with room for four pixels from its last row's first.
+            let first = at.index(len - 2 * width - 3);
+            let key = key_near(key.0.max(1), key.1, limit);
+            let samples = (u64::from(sample.0), u64::from(sample.1));
+            let (mut plain, mut expected) = (depth.clone(), depth.clone());
+            let seen = Baseline.depth_3x3(&mut plain, first, width, key, limit);
+            let mut hidden = true;
+            let mut sums = accum.clone();
+            for row in [first, first + width, first + 2 * width] {
+                for k in row..row + 3 {
+                    hidden &= f32::from_bits(expected[k]) < limit;
+                    expected[k] = expected[k].min(key);
+                    if f32::from_bits(depth[k]) >= limit {
+                        sums[k][0] += samples.0;
+                        sums[k][1] += samples.1;
+                    }
+                }
+            }
+            prop_assert_eq!(seen, !hidden);
+            prop_assert_eq!(&plain, &expected);
+            let mut got = accum.clone();
+            Baseline.accumulate_3x3(&depth, &mut got, first, width, limit, samples.0, samples.1);
+            prop_assert_eq!(&got, &sums);
+            #[cfg(target_arch = "x86_64")]
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                same_3x3(Avx512(simd), &depth, &accum, first, width, key, limit, samples)?;
+            }
+        }
+
         /// `floor_small` is `floor` over its whole domain, halves and negative values
         /// included.
         #[test]

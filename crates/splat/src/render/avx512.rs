@@ -202,3 +202,76 @@ pub(super) fn project_splats(
         }
     }
 }
+
+/// `_CMP_GE_OQ` (false where either is a NaN, as Rust's `>=`) and `_CMP_NLT_UQ` (true
+/// where either is a NaN, as Rust's `!(a < b)`).
+const GE: i32 = 29;
+const NLT: i32 = 21;
+
+/// Each of the low four bits of a mask spread over two bits (a pixel's two sums).
+const PAIRS: [u8; 8] = [
+    0b00, 0b11, 0b1100, 0b1111, 0b11_0000, 0b11_0011, 0b11_1100, 0b11_1111,
+];
+
+/// Four keys from `depth` at `k` (the caller checked `k + 4 ≤ len`).
+#[inline(always)]
+fn four(depth: &[u32], k: usize) -> [u32; 4] {
+    *<&[u32; 4]>::try_from(&depth[k..k + 4]).expect("four keys")
+}
+
+/// Pass 1 of a 3 × 3 splat whose top-left pixel is `first` (rows `width` apart; the
+/// caller checked that four pixels from its last row's first are in `depth`): each
+/// row's three keys take their minimum with `key` in one instruction (the fourth is
+/// written back as it was). Returns whether a pixel held a range not below `limit`
+/// before (a NaN, an empty pixel, counts): [`super::splat_depth`]'s result.
+#[inline(always)]
+pub(super) fn depth_3x3(
+    simd: V4,
+    depth: &mut [u32],
+    first: usize,
+    width: usize,
+    key: u32,
+    limit: f32,
+) -> bool {
+    use core::arch::x86_64::{__m128, __m128i};
+    let f = simd.avx512f;
+    let keys: __m128i = pulp::cast([key; 4]);
+    let limits: __m128 = pulp::cast([limit; 4]);
+    let mut seen = 0u8;
+    for row in [first, first + width, first + 2 * width] {
+        let before: __m128i = pulp::cast(four(depth, row));
+        let after = f._mm_mask_min_epu32(before, 0b111, before, keys);
+        *<&mut [u32; 4]>::try_from(&mut depth[row..row + 4]).expect("four keys") =
+            pulp::cast(after);
+        seen |= f._mm_cmp_ps_mask::<NLT>(pulp::cast(before), limits);
+    }
+    seen & 0b111 != 0
+}
+
+/// Pass 2 of a 3 × 3 splat (as [`depth_3x3`]): each row's three pixels whose key is
+/// at least `limit` add `sample` and `range_sample` to their two sums, in one masked
+/// addition of eight 64-bit lanes (the fourth pixel's sums are written back as they
+/// were).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn accumulate_3x3(
+    simd: V4,
+    depth: &[u32],
+    accum: &mut [[u64; 2]],
+    first: usize,
+    width: usize,
+    limit: f32,
+    sample: u64,
+    range_sample: u64,
+) {
+    use core::arch::x86_64::__m128;
+    let f = simd.avx512f;
+    let samples: __m512i = pulp::cast([[sample, range_sample]; 4]);
+    let limits: __m128 = pulp::cast([limit; 4]);
+    for row in [first, first + width, first + 2 * width] {
+        let near = f._mm_cmp_ps_mask::<GE>(pulp::cast(four(depth, row)), limits) & 0b111;
+        let sums = <&mut [[u64; 2]; 4]>::try_from(&mut accum[row..row + 4]).expect("four");
+        let before: __m512i = pulp::cast(*sums);
+        *sums = pulp::cast(f._mm512_mask_add_epi64(before, PAIRS[near as usize], before, samples));
+    }
+}
