@@ -1555,6 +1555,13 @@ fn project_lanes_portable<const N: usize>(
 }
 
 impl Splat {
+    /// The pixel of a single-pixel splat (drawn splats reach the image, and one pixel
+    /// wide they are inside it).
+    #[inline(always)]
+    fn single_pixel(&self, view: &View) -> usize {
+        self.iv() as usize * view.width as usize + self.iu() as usize
+    }
+
     /// The top-left pixel of a 3 × 3 splat inside the image whose rows can be read
     /// four pixels at a time from a buffer of `len` pixels (every 3 × 3 splat but at
     /// the buffer's last pixels).
@@ -1578,7 +1585,7 @@ impl Splat {
         let (iu, iv, n) = (self.iu(), self.iv(), i32::from(self.width()));
         if n == 1 {
             // Most splats: a single pixel, inside the image.
-            f(iv as usize * w + iu as usize);
+            f(self.single_pixel(view));
             return;
         }
         if n == 3 && iu >= 0 && iv >= 0 && iu + 3 <= view.width && iv + 3 <= view.height {
@@ -1618,6 +1625,13 @@ fn splat_depth(s: &Splat, view: &View, depth: &mut Depths<'_>, projector: impl P
             hidden &= f32::from_bits(before) < limit;
         }),
         Depths::Own(depth) => {
+            // Most splats: a single pixel, decided first (before the 3 × 3 test).
+            if s.width() == 1 {
+                let k = s.single_pixel(view);
+                let before = depth[k];
+                depth[k] = key.min(before);
+                return !(f32::from_bits(before) < limit);
+            }
             if let Some(first) = s.whole_3x3(view, depth.len()) {
                 return projector.depth_3x3(depth, first, view.width as usize, key, limit);
             }
@@ -1822,6 +1836,13 @@ fn accumulate_own(
     for s in splats.iter().filter(|s| s.drawn()) {
         let (sample, range_sample) = samples(s);
         let limit = s.limit_m();
+        if s.width() == 1 {
+            let k = s.single_pixel(view);
+            let keep = 0u64.wrapping_sub(u64::from(f32::from_bits(depth[k]) >= limit));
+            let sums = &mut accum[k];
+            *sums = [sums[0] + (sample & keep), sums[1] + (range_sample & keep)];
+            continue;
+        }
         if let Some(first) = s.whole_3x3(view, depth.len()) {
             let width = view.width as usize;
             projector.accumulate_3x3(depth, accum, first, width, limit, sample, range_sample);
