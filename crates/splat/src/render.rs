@@ -326,13 +326,6 @@ impl Region {
     fn len(&self) -> usize {
         self.width * self.height
     }
-
-    /// The region's index of the image pixel `k` of an image `image_width` wide
-    /// (which must lie inside the region).
-    #[inline(always)]
-    fn index(&self, k: usize, image_width: usize) -> usize {
-        (k / image_width - self.v0) * self.width + k % image_width - self.u0
-    }
 }
 
 /// A renderer for one camera, owning its buffers (no allocation per frame once warm).
@@ -513,13 +506,9 @@ impl Renderer {
         self.select_cells(cloud, &view);
         let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
 
-        for d in &self.depth {
-            d.store(EMPTY, Ordering::Relaxed);
-        }
-        for [a, b] in &self.accum {
-            a.store(0, Ordering::Relaxed);
-            b.store(0, Ordering::Relaxed);
-        }
+        // Cleared as plain integers (stores the compiler widens, unlike atomic ones).
+        plain::depths(&mut self.depth).fill(EMPTY);
+        plain::sums(&mut self.accum).fill([0; 2]);
         let parallel = self.options.parallel && rayon::current_num_threads() > 1;
         let occlusion = self.options.occlusion_culling && view.undistorted;
         self.splats.resize(candidate_points, Splat::default());
@@ -573,35 +562,50 @@ impl Renderer {
             widest_pass_two(splats, &view, depth, plain::sums(&mut self.accum));
         }
 
-        // Resolve.
+        // Resolve: pixels outside the valid pixels' box are masked; inside it, row by
+        // row without a branch (whether a pixel is hit is unpredictable at edges).
         let background = self.options.background;
         let valid = self.camera.valid_pixels();
         let image_width = self.camera.width() as usize;
+        let Region {
+            u0,
+            v0,
+            width,
+            height,
+        } = self.region;
+        let depth = plain::depths(&mut self.depth);
+        let accum = plain::sums(&mut self.accum);
         let mut pixels_hit = 0;
-        for k in 0..valid.len() {
-            if !valid[k] {
-                frame.intensity[k] = 0.0;
-                frame.range_m[k] = f32::NAN;
-                frame.status[k] = PixelStatus::Masked;
+        let rows = frame
+            .intensity
+            .chunks_exact_mut(image_width)
+            .zip(frame.range_m.chunks_exact_mut(image_width))
+            .zip(frame.status.chunks_exact_mut(image_width))
+            .zip(valid.chunks_exact(image_width));
+        for (y, (((intensity, range_m), status), valid)) in rows.enumerate() {
+            let inside = if (v0..v0 + height).contains(&y) {
+                u0..u0 + width
+            } else {
+                0..0
+            };
+            for part in [0..inside.start, inside.end.max(inside.start)..image_width] {
+                intensity[part.clone()].fill(0.0);
+                range_m[part.clone()].fill(f32::NAN);
+                status[part].fill(PixelStatus::Masked);
+            }
+            if inside.is_empty() {
                 continue;
             }
-            let r = self.region.index(k, image_width);
-            let key = self.depth[r].load(Ordering::Relaxed);
-            let sums = self.accum[r][0].load(Ordering::Relaxed);
-            let range_sum = self.accum[r][1].load(Ordering::Relaxed);
-            let count = sums & COUNT_MASK;
-            if key == EMPTY || count == 0 {
-                frame.intensity[k] = background;
-                frame.range_m[k] = f32::INFINITY;
-                frame.status[k] = PixelStatus::Sky;
-            } else {
-                let sum = (sums >> COUNT_BITS) as f64;
-                frame.intensity[k] = (sum / (count as f64 * f64::from(INTENSITY_SCALE))) as f32;
-                frame.range_m[k] =
-                    (range_sum as f64 / (count as f64 * f64::from(RANGE_SCALE))) as f32;
-                frame.status[k] = PixelStatus::Hit;
-                pixels_hit += 1;
-            }
+            let r = (y - v0) * width;
+            pixels_hit += resolve_row(
+                &depth[r..r + width],
+                &accum[r..r + width],
+                &valid[inside.clone()],
+                background,
+                &mut intensity[inside.clone()],
+                &mut range_m[inside.clone()],
+                &mut status[inside],
+            );
         }
         if self.options.fill_holes {
             pixels_hit += self.fill_holes(frame);
@@ -1792,6 +1796,44 @@ impl<'a> Warm<'a> {
     fn finish(self) {
         std::hint::black_box(self.loaded);
     }
+}
+
+/// Resolve a row of the valid pixels' box: the mean intensity and range of a pixel's
+/// samples if it has some (a hit), the background and an infinite range if it has
+/// none (sky), 0 and NaN outside the valid region (masked). Every pixel's means are
+/// computed, and kept or not, so that the loop has no branch. Returns the hits.
+#[inline(always)]
+fn resolve_row(
+    depth: &[u32],
+    accum: &[[u64; 2]],
+    valid: &[bool],
+    background: f32,
+    intensity: &mut [f32],
+    range_m: &mut [f32],
+    status: &mut [PixelStatus],
+) -> usize {
+    let mut hits = 0;
+    let pixels = depth
+        .iter()
+        .zip(accum)
+        .zip(valid)
+        .zip(intensity.iter_mut())
+        .zip(range_m.iter_mut())
+        .zip(status.iter_mut());
+    for (((((&key, &[sums, range_sum]), &valid), intensity), range_m), status) in pixels {
+        let count = sums & COUNT_MASK;
+        let hit = key != EMPTY && count != 0;
+        let n = count as f64;
+        let mean = ((sums >> COUNT_BITS) as f64 / (n * f64::from(INTENSITY_SCALE))) as f32;
+        let mean_range = (range_sum as f64 / (n * f64::from(RANGE_SCALE))) as f32;
+        (*intensity, *range_m, *status) = match (valid, hit) {
+            (false, _) => (0.0, f32::NAN, PixelStatus::Masked),
+            (true, true) => (mean, mean_range, PixelStatus::Hit),
+            (true, false) => (background, f32::INFINITY, PixelStatus::Sky),
+        };
+        hits += usize::from(valid && hit);
+    }
+    hits
 }
 
 /// A splat's two samples: its intensity (16-bit fixed point, above a count of one)
