@@ -981,7 +981,7 @@ fn draw_depth(
     parallel: bool,
 ) -> usize {
     if !parallel {
-        let depth = Depths::Own(plain::depths(depth));
+        let depth = plain::depths(depth);
         return widest_pass_one(points, cells, view, camera, depth, splats);
     }
     let depth = &*depth;
@@ -996,7 +996,7 @@ fn draw_depth(
         rest = tail;
     }
     slices.par_iter_mut().for_each(|(cells, splats)| {
-        let kept = widest_pass_one(points, cells, view, camera, Depths::Shared(depth), splats);
+        let kept = widest_pass_one(points, cells, view, camera, depth, splats);
         for s in &mut splats[kept..] {
             *s = Splat::not_drawn();
         }
@@ -1418,16 +1418,16 @@ impl Project for Avx2 {
 }
 
 /// The arguments of [`project_and_depth`] but the projector.
-struct PassOneArgs<'a> {
+struct PassOneArgs<'a, D> {
     points: &'a [[f32; 4]],
     cells: &'a [DrawCell],
     view: &'a View,
     camera: &'a Camera,
-    depth: Depths<'a>,
+    depth: D,
     splats: &'a mut [Splat],
 }
 
-impl PassOneArgs<'_> {
+impl<D: Depths> PassOneArgs<'_, D> {
     #[inline(always)]
     fn run(self, projector: impl Project) -> usize {
         let a = self;
@@ -1437,19 +1437,61 @@ impl PassOneArgs<'_> {
     }
 }
 
-/// The depth buffer as pass 1 writes it: shared by the threads of a parallel pass
-/// (atomic minima), or held by one thread (plain keys, several pixels at a time).
-enum Depths<'a> {
-    Shared(&'a [AtomicU32]),
-    Own(&'a mut [u32]),
+/// The depth buffer as pass 1 writes it ([`splat_depth`]): shared by the threads of
+/// a parallel pass (`&[AtomicU32]`, atomic minima), or held by one thread
+/// (`&mut [u32]`, plain keys, several pixels at a time). A trait, so that each pass
+/// is compiled for its buffer.
+trait Depths {
+    /// Take the minimum of the splat's key and each covered pixel's; whether the
+    /// splat may still add a sample.
+    fn splat(&mut self, s: &Splat, view: &View, projector: impl Project) -> bool;
+}
+
+impl Depths for &[AtomicU32] {
+    #[inline(always)]
+    fn splat(&mut self, s: &Splat, view: &View, _: impl Project) -> bool {
+        let (key, limit) = (s.0[2], s.limit_m());
+        let mut hidden = true;
+        s.for_each_pixel(view, |k| {
+            let before = self[k].fetch_min(key, Ordering::Relaxed);
+            // An empty pixel's key is a NaN: never below the limit.
+            hidden &= f32::from_bits(before) < limit;
+        });
+        !hidden
+    }
+}
+
+impl Depths for &mut [u32] {
+    #[inline(always)]
+    fn splat(&mut self, s: &Splat, view: &View, projector: impl Project) -> bool {
+        let (key, limit) = (s.0[2], s.limit_m());
+        // Most splats: a single pixel, decided first (before the 3 × 3 test).
+        if s.width() == 1 {
+            let k = s.single_pixel(view);
+            let before = self[k];
+            self[k] = key.min(before);
+            return !(f32::from_bits(before) < limit);
+        }
+        if let Some(first) = s.whole_3x3(view, self.len()) {
+            return projector.depth_3x3(self, first, view.width as usize, key, limit);
+        }
+        let mut hidden = true;
+        s.for_each_pixel(view, |k| {
+            // Branch-free: whether a point is nearer is unpredictable.
+            let before = self[k];
+            self[k] = key.min(before);
+            hidden &= f32::from_bits(before) < limit;
+        });
+        !hidden
+    }
 }
 
 /// [`project_and_depth`] with a projector, to run compiled for its instruction set
 /// (a struct, not a closure: pulp's `with_simd` is compiled for the instruction set,
 /// and only an `#[inline(always)]` method is sure to be inlined into it).
-struct PassOne<'a, P>(PassOneArgs<'a>, P);
+struct PassOne<'a, D, P>(PassOneArgs<'a, D>, P);
 
-impl<P: Project> pulp::WithSimd for PassOne<'_, P> {
+impl<D: Depths, P: Project> pulp::WithSimd for PassOne<'_, D, P> {
     type Output = usize;
 
     #[inline(always)]
@@ -1465,7 +1507,7 @@ fn widest_pass_one(
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: Depths<'_>,
+    depth: impl Depths,
     splats: &mut [Splat],
 ) -> usize {
     let args = PassOneArgs {
@@ -1618,36 +1660,8 @@ impl Splat {
 /// already held a range below its band (depths only decrease, so pass 2 would reject
 /// it everywhere; the test is pass 2's own, on a depth at least the final one).
 #[inline(always)]
-fn splat_depth(s: &Splat, view: &View, depth: &mut Depths<'_>, projector: impl Project) -> bool {
-    let key = s.0[2];
-    let limit = s.limit_m();
-    let mut hidden = true;
-    match depth {
-        Depths::Shared(depth) => s.for_each_pixel(view, |k| {
-            let before = depth[k].fetch_min(key, Ordering::Relaxed);
-            // An empty pixel's key is a NaN: never below the limit.
-            hidden &= f32::from_bits(before) < limit;
-        }),
-        Depths::Own(depth) => {
-            // Most splats: a single pixel, decided first (before the 3 × 3 test).
-            if s.width() == 1 {
-                let k = s.single_pixel(view);
-                let before = depth[k];
-                depth[k] = key.min(before);
-                return !(f32::from_bits(before) < limit);
-            }
-            if let Some(first) = s.whole_3x3(view, depth.len()) {
-                return projector.depth_3x3(depth, first, view.width as usize, key, limit);
-            }
-            s.for_each_pixel(view, |k| {
-                // Branch-free: whether a point is nearer is unpredictable.
-                let before = depth[k];
-                depth[k] = key.min(before);
-                hidden &= f32::from_bits(before) < limit;
-            });
-        }
-    }
-    !hidden
+fn splat_depth(s: &Splat, view: &View, depth: &mut impl Depths, projector: impl Project) -> bool {
+    depth.splat(s, view, projector)
 }
 
 /// Pass 2 keeps a sample of range `range_m` at the pixels whose nearest range is at
@@ -1666,7 +1680,7 @@ fn project_and_depth(
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    mut depth: Depths<'_>,
+    mut depth: impl Depths,
     splats: &mut [Splat],
     projector: impl Project,
 ) -> usize {
