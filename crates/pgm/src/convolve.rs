@@ -136,7 +136,7 @@ struct RowOp<'a> {
 
 impl crate::simd::Kernel for RowOp<'_> {
     #[inline(always)]
-    fn run(self) {
+    fn run<S: pulp::Simd>(self, _: S) {
         row_inline(self.s, self.d, self.width, self.kernel, self.span, self.pad);
     }
 }
@@ -243,7 +243,7 @@ struct ColumnOp<'a> {
 
 impl crate::simd::Kernel for ColumnOp<'_> {
     #[inline(always)]
-    fn run(self) {
+    fn run<S: pulp::Simd>(self, _: S) {
         let Self {
             src,
             d,

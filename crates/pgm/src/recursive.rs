@@ -24,13 +24,14 @@
 //! λ = 40; for comparison the exact correlation truncated at 4λ drops tails of 3.4e-4
 //! of the peak.
 //!
-//! Passes run down the columns of a row-major plane, a block of two vectors of
-//! columns at a time whose recursion state stays in registers from the first row to
-//! the last (interleaved channels are filtered together); the caller transposes the
-//! plane to filter along its rows. Precision: `f32` arithmetic, `f64` design. The
-//! loops run on the widest instruction set found at run time (AVX2 or AVX-512 on this
-//! project's machines, SSE2 on any x86-64), with the same bits on every one, and the
-//! bits of the plain recursion of each column (tested).
+//! Passes run down the columns of a row-major plane, a block of vectors of columns at
+//! a time (two on AVX-512, one on AVX2 and SSE4.2) whose recursion state stays in
+//! registers from the first row to the last (interleaved channels are filtered
+//! together); the caller transposes the plane to filter along its rows. Precision:
+//! `f32` arithmetic, `f64` design. The loops run on the widest instruction set found
+//! at run time (AVX-512, AVX2 or SSE4.2 on x86-64), with the same bits on every one,
+//! and the bits of the plain recursion of each column (tested on every level the
+//! processor has).
 
 /// Pole pairs `(b, ω)` (units of `1/λ`) of the three sections of each kernel: found
 /// by minimising the fit's RMS error over the poles (Nelder–Mead on the continuous
@@ -319,10 +320,17 @@ impl Coefficients {
     }
 }
 
-/// Vectors per block of columns of a sweep: the block's state (two past outputs per
-/// section, two past inputs, the sums: 18 vectors) and the twelve coefficients fit
-/// in AVX-512's 32 registers.
+/// Most vectors per block of columns of a sweep.
 const BLOCK: usize = 2;
+
+/// Vectors per block of columns of a sweep on the instruction set `S`: two where it
+/// has 32 registers (the block's state, two past outputs per section, two past inputs
+/// and the sums, 18 vectors, and the twelve coefficients fit in them), one where it has
+/// 16.
+#[inline(always)]
+fn vectors<S: pulp::Simd>() -> usize {
+    if S::REGISTER_COUNT >= 32 { BLOCK } else { 1 }
+}
 
 /// The `f32` lanes `[v · lanes, (v + 1) · lanes)` of a block of `n` columns that are
 /// inside it (an empty range past `n`).
@@ -352,11 +360,11 @@ fn store<S: pulp::Simd>(simd: S, part: &mut [f32], value: S::f32s) {
 }
 
 /// One sweep of the three sections down or up the rows `[r0, r1)` of the block of
-/// columns `[x0, x0 + n)`, `n ≤ BLOCK · lanes` (the input taken as zero before them),
+/// columns `[x0, x0 + n)`, `n ≤` [`vectors`] `· lanes` (the input taken as zero before them),
 /// handing `emit.row(y, sums)` the sum of the sections' outputs at every row, row
 /// after row. The block's state stays in registers for the whole sweep: each row
 /// reads its input and hands its sums, nothing else goes to memory. Lanes past `n`
-/// read zeros and are never written.
+/// read zeros and are never written to the destination.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn sweep<S: pulp::Simd, E: Emit<S>>(
@@ -385,7 +393,7 @@ fn sweep<S: pulp::Simd, E: Emit<S>>(
     for t in 0..r1 - r0 {
         let y = if down { r0 + t } else { r1 - 1 - t };
         let mut sums = [zero; BLOCK];
-        for v in 0..BLOCK {
+        for v in 0..vectors::<S>() {
             let (a, b) = (x1[v], x2[v]);
             let mut out = [zero; 3];
             for i in 0..3 {
@@ -401,7 +409,7 @@ fn sweep<S: pulp::Simd, E: Emit<S>>(
         emit.row(y, sums);
         x2 = x1;
         let line = &src[y * width + x0..][..n];
-        for (v, x) in x1.iter_mut().enumerate() {
+        for (v, x) in x1.iter_mut().enumerate().take(vectors::<S>()) {
             *x = load(simd, &line[lanes_of::<S>(v, n)]);
         }
     }
@@ -510,17 +518,12 @@ struct ColumnsOp<'a> {
 
 impl crate::simd::Kernel for ColumnsOp<'_> {
     #[inline(always)]
-    fn run(self) {
-        columns_inline(pulp::Scalar, self);
-    }
-
-    #[inline(always)]
-    fn run_on<S: pulp::Simd>(self, simd: S) {
+    fn run<S: pulp::Simd>(self, simd: S) {
         columns_inline(simd, self);
     }
 }
 
-/// [`columns`] and [`columns_every`] in blocks of `BLOCK` vectors of columns,
+/// [`columns`] and [`columns_every`] in blocks of [`vectors`] of columns,
 /// inlined into each instruction set's copy.
 #[inline(always)]
 fn columns_inline<S: pulp::Simd>(simd: S, op: ColumnsOp<'_>) {
@@ -536,7 +539,7 @@ fn columns_inline<S: pulp::Simd>(simd: S, op: ColumnsOp<'_>) {
     } = op;
     let ([c0, c1], rows) = (window.columns, window.rows);
     let height = rows[1] - rows[0];
-    let block = BLOCK * S::F32_LANES;
+    let block = vectors::<S>() * S::F32_LANES;
     let mut causal = std::mem::take(&mut scratch.causal);
     causal.resize(height * block, 0.0);
     let (center, sigma) = (filter.center, filter.symmetry);
@@ -575,8 +578,8 @@ trait Emit<S: pulp::Simd> {
     fn row(&mut self, y: usize, sums: [S::f32s; BLOCK]);
 }
 
-/// The causal sweep's [`Emit`]: keep every row's sums (whole vectors, `BLOCK`
-/// vectors a row).
+/// The causal sweep's [`Emit`]: keep every row's sums (whole vectors, [`vectors`]
+/// a row).
 struct Causal<'a, S> {
     simd: S,
     causal: &'a mut [f32],
@@ -587,8 +590,9 @@ impl<S: pulp::Simd> Emit<S> for Causal<'_, S> {
     #[inline(always)]
     fn row(&mut self, y: usize, sums: [S::f32s; BLOCK]) {
         let (lanes, y) = (S::F32_LANES, y - self.first_row);
-        let row = &mut self.causal[y * BLOCK * lanes..][..BLOCK * lanes];
-        for (v, sum) in sums.into_iter().enumerate() {
+        let block = vectors::<S>() * lanes;
+        let row = &mut self.causal[y * block..][..block];
+        for (v, sum) in sums.into_iter().enumerate().take(vectors::<S>()) {
             store(self.simd, &mut row[v * lanes..(v + 1) * lanes], sum);
         }
     }
@@ -630,8 +634,9 @@ impl<S: pulp::Simd> Emit<S> for Finish<'_, S> {
         let (center, sigma) = (simd.splat_f32s(self.center), simd.splat_f32s(self.sigma));
         let (at, to) = (y * width + x0, out * width + x0);
         let (src, dst) = (&self.src[at..at + n], &mut self.dst[to..to + n]);
-        let causal = &self.causal[yc * BLOCK * lanes..][..BLOCK * lanes];
-        for (v, a) in a.into_iter().enumerate() {
+        let block = vectors::<S>() * lanes;
+        let causal = &self.causal[yc * block..][..block];
+        for (v, a) in a.into_iter().enumerate().take(vectors::<S>()) {
             let part = lanes_of::<S>(v, n);
             let s = load(simd, &src[part.clone()]);
             let c = load(simd, &causal[v * lanes..(v + 1) * lanes]);
@@ -715,8 +720,8 @@ mod tests {
     }
 
     /// A column pass equals the impulse response applied as a correlation (zero
-    /// padding), for every column and both modes, with interleaved widths that are not
-    /// multiples of the block.
+    /// padding), for both modes, at the edges of the blocks of every instruction set
+    /// and at the last column (a width that is not a multiple of any block).
     #[test]
     fn column_pass_is_the_correlation_of_the_impulse_response() {
         let (width, height) = (300, 37);
@@ -737,7 +742,7 @@ mod tests {
                 Mode::Add,
                 &mut scratch,
             );
-            for x in [0, 1, 255, 256, 299] {
+            for x in [0, 1, 15, 16, 31, 32, 255, 256, 299] {
                 for y in 0..height {
                     let mut expected = 0.5f64;
                     for yy in 0..height {
@@ -829,68 +834,73 @@ mod tests {
                     let mut sc = Scratch::default();
                     columns(&src, &mut fast, width, window, &filter, mode, &mut sc);
                     assert_eq!(bits(&fast), bits(&expected), "{width} {shape:?} {mode:?}");
-                    let mut scalar = before.clone();
-                    crate::simd::on_scalar(ColumnsOp {
-                        src: &src,
-                        dst: &mut scalar,
-                        width,
-                        window,
-                        filter: &filter,
-                        mode,
-                        step: 1,
-                        scratch: &mut sc,
-                    });
-                    assert_eq!(bits(&scalar), bits(&expected), "{width} {shape:?} {mode:?}");
+                    // Every instruction set this processor has, and the baseline.
+                    for level in crate::simd::levels() {
+                        let mut out = before.clone();
+                        crate::simd::on_level(
+                            level,
+                            ColumnsOp {
+                                src: &src,
+                                dst: &mut out,
+                                width,
+                                window,
+                                filter: &filter,
+                                mode,
+                                step: 1,
+                                scratch: &mut Scratch::default(),
+                            },
+                        );
+                        let what = format!("{level} {width} {shape:?} {mode:?}");
+                        assert_eq!(bits(&out), bits(&expected), "{what}");
+                    }
                 }
             }
         }
     }
 
-    /// The pass on the instruction set detected at run time (AVX2 or AVX-512 here)
-    /// gives the bits of the plain scalar loops.
+    /// The pass on every instruction set this processor has gives the bits of the
+    /// baseline's loops (a window whose columns are not a multiple of any block).
     #[test]
     fn every_instruction_set_gives_the_same_bits() {
         let (width, height) = (6 * 53, 41);
         let src: Vec<f32> = (0..width * height)
             .map(|k| ((k * 7919) % 1000) as f32 / 1000.0 - 0.3)
             .collect();
+        let window = Window {
+            columns: [6, width - 12],
+            rows: [2, height - 1],
+        };
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for shape in [Shape::Gaussian, Shape::SquaredOffset, Shape::Derivative] {
             let filter = Recursive::new(shape, 3.7);
             for mode in [Mode::Write, Mode::Add] {
-                let mut fast = vec![0.25f32; width * height];
-                let mut scalar = fast.clone();
-                let window = Window {
-                    columns: [6, width - 12],
-                    rows: [2, height - 1],
+                let run = |level: &str| {
+                    let mut out = vec![0.25f32; width * height];
+                    crate::simd::on_level(
+                        level,
+                        ColumnsOp {
+                            src: &src,
+                            dst: &mut out,
+                            width,
+                            window,
+                            filter: &filter,
+                            mode,
+                            step: 1,
+                            scratch: &mut Scratch::default(),
+                        },
+                    );
+                    bits(&out)
                 };
-                columns(
-                    &src,
-                    &mut fast,
-                    width,
-                    window,
-                    &filter,
-                    mode,
-                    &mut Scratch::default(),
-                );
-                crate::simd::on_scalar(ColumnsOp {
-                    src: &src,
-                    dst: &mut scalar,
-                    width,
-                    window,
-                    filter: &filter,
-                    mode,
-                    step: 1,
-                    scratch: &mut Scratch::default(),
-                });
-                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&fast), bits(&scalar), "{shape:?} {mode:?}");
+                let baseline = run("baseline");
+                for level in crate::simd::levels() {
+                    assert_eq!(run(level), baseline, "{level} {shape:?} {mode:?}");
+                }
             }
         }
     }
 
     /// [`columns_every`] keeps, packed, exactly the rows `r0, r0 + step, …` and the
-    /// last of the pass over every row, on the instruction set detected at run time and
-    /// on the scalar loops alike.
+    /// last of the pass over every row, on every instruction set this processor has.
     #[test]
     fn kept_rows_are_the_rows_of_the_whole_pass() {
         let (width, height) = (6 * 53, 41);
@@ -916,18 +926,27 @@ mod tests {
         for step in [2, 3, 7, 38, 39] {
             let kept = kept_rows(window.rows, step);
             let mut fast = vec![0.0f32; kept * width];
-            let mut scalar = fast.clone();
             columns_every(&src, &mut fast, width, window, &filter, step, &mut scratch);
-            crate::simd::on_scalar(ColumnsOp {
-                src: &src,
-                dst: &mut scalar,
-                width,
-                window,
-                filter: &filter,
-                mode: Mode::Write,
-                step,
-                scratch: &mut scratch,
-            });
+            let by_level: Vec<(&str, Vec<f32>)> = crate::simd::levels()
+                .into_iter()
+                .map(|level| {
+                    let mut out = vec![0.0f32; kept * width];
+                    crate::simd::on_level(
+                        level,
+                        ColumnsOp {
+                            src: &src,
+                            dst: &mut out,
+                            width,
+                            window,
+                            filter: &filter,
+                            mode: Mode::Write,
+                            step,
+                            scratch: &mut Scratch::default(),
+                        },
+                    );
+                    (level, out)
+                })
+                .collect();
             let [r0, r1] = window.rows;
             let mut rows: Vec<usize> = (r0..r1).step_by(step).collect();
             if rows.last() != Some(&(r1 - 1)) {
@@ -942,11 +961,10 @@ mod tests {
                     want,
                     "step {step} row {y}"
                 );
-                assert_eq!(
-                    &scalar[k * width + c0..k * width + c1],
-                    want,
-                    "step {step} row {y}"
-                );
+                for (level, out) in &by_level {
+                    let got = &out[k * width + c0..k * width + c1];
+                    assert_eq!(got, want, "{level} step {step} row {y}");
+                }
             }
         }
     }

@@ -224,7 +224,7 @@ struct Interpolate<'a> {
 
 impl crate::simd::Kernel for Interpolate<'_> {
     #[inline(always)]
-    fn run(self) {
+    fn run<S: pulp::Simd>(self, _: S) {
         let width = self.width;
         for run in self.between {
             let (k, len) = (run.pixel as usize, run.len as usize);

@@ -1239,7 +1239,7 @@ trait Project: Copy {
     /// The splats of fewer than [`BLOCK`] points (a cell's last ones), as many as `out`.
     fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]);
 
-    /// Pass 1 of a 3 × 3 splat on plain keys ([`splat_depth_3x3`]); the plain loop
+    /// Pass 1 of a 3 × 3 splat on plain keys ([`Depths::splat`]); the plain loop
     /// unless the instruction set does it whole rows at a time.
     #[inline(always)]
     fn depth_3x3(
@@ -1437,13 +1437,16 @@ impl<D: Depths> PassOneArgs<'_, D> {
     }
 }
 
-/// The depth buffer as pass 1 writes it ([`splat_depth`]): shared by the threads of
+/// The depth buffer as pass 1 writes it ([`Depths::splat`]): shared by the threads of
 /// a parallel pass (`&[AtomicU32]`, atomic minima), or held by one thread
 /// (`&mut [u32]`, plain keys, several pixels at a time). A trait, so that each pass
 /// is compiled for its buffer.
 trait Depths {
-    /// Take the minimum of the splat's key and each covered pixel's; whether the
-    /// splat may still add a sample.
+    /// Take the minimum of the splat's range and the depth of each pixel it covers.
+    /// Returns whether the splat may still add a sample in pass 2: not if every pixel
+    /// already held a range below its band (depths only decrease, so pass 2 would
+    /// reject it everywhere; the test is pass 2's own, on a depth at least the final
+    /// one).
     fn splat(&mut self, s: &Splat, view: &View, projector: impl Project) -> bool;
 }
 
@@ -1619,8 +1622,11 @@ impl Splat {
             && iv >= 0
             && iu + 3 <= view.width
             && iv + 3 <= view.height;
+        if !inside {
+            return None;
+        }
         let first = iv as usize * view.width as usize + iu as usize;
-        (inside && first + 2 * view.width as usize + 4 <= len).then_some(first)
+        (first + 2 * view.width as usize + 4 <= len).then_some(first)
     }
 
     /// Call `f` with the index of every pixel the splat covers, clipped to the image
@@ -1653,15 +1659,6 @@ impl Splat {
             }
         }
     }
-}
-
-/// Take the minimum of the splat's range and the depth of each pixel it covers.
-/// Returns whether the splat may still add a sample in pass 2: not if every pixel
-/// already held a range below its band (depths only decrease, so pass 2 would reject
-/// it everywhere; the test is pass 2's own, on a depth at least the final one).
-#[inline(always)]
-fn splat_depth(s: &Splat, view: &View, depth: &mut impl Depths, projector: impl Project) -> bool {
-    depth.splat(s, view, projector)
 }
 
 /// Pass 2 keeps a sample of range `range_m` at the pixels whose nearest range is at
@@ -1722,7 +1719,7 @@ fn project_and_depth(
             // Keep the splats that may add a sample (`kept` never passes the number of
             // points read, so its slot exists).
             for s in out.iter().filter(|s| s.drawn()) {
-                let visible = splat_depth(s, view, &mut depth, projector);
+                let visible = depth.splat(s, view, projector);
                 splats[kept] = *s;
                 kept += usize::from(visible);
             }
