@@ -759,6 +759,36 @@ mod tests {
         }
     }
 
+    /// The pass of `filter` over `window` on the instruction set `level`
+    /// ([`crate::simd::levels`]), into a copy of `dst` (kept rows packed if `step` > 1).
+    #[allow(clippy::too_many_arguments)]
+    fn pass_on(
+        level: &str,
+        src: &[f32],
+        dst: &[f32],
+        width: usize,
+        window: Window,
+        filter: &Recursive,
+        mode: Mode,
+        step: usize,
+    ) -> Vec<f32> {
+        let mut out = dst.to_vec();
+        let scratch = &mut Scratch::default();
+        let (src, dst) = (src, out.as_mut_slice());
+        let op = ColumnsOp {
+            src,
+            dst,
+            width,
+            window,
+            filter,
+            mode,
+            step,
+            scratch,
+        };
+        crate::simd::on_level(level, op);
+        out
+    }
+
     /// The plain recursion of one column, element by element, with the blocked
     /// passes' operations in their order: causal and anticausal sums of the three
     /// sections from zero states, then `K(0) x + a + σ c`.
@@ -836,20 +866,7 @@ mod tests {
                     assert_eq!(bits(&fast), bits(&expected), "{width} {shape:?} {mode:?}");
                     // Every instruction set this processor has, and the baseline.
                     for level in crate::simd::levels() {
-                        let mut out = before.clone();
-                        crate::simd::on_level(
-                            level,
-                            ColumnsOp {
-                                src: &src,
-                                dst: &mut out,
-                                width,
-                                window,
-                                filter: &filter,
-                                mode,
-                                step: 1,
-                                scratch: &mut Scratch::default(),
-                            },
-                        );
+                        let out = pass_on(level, &src, &before, width, window, &filter, mode, 1);
                         let what = format!("{level} {width} {shape:?} {mode:?}");
                         assert_eq!(bits(&out), bits(&expected), "{what}");
                     }
@@ -874,22 +891,11 @@ mod tests {
         for shape in [Shape::Gaussian, Shape::SquaredOffset, Shape::Derivative] {
             let filter = Recursive::new(shape, 3.7);
             for mode in [Mode::Write, Mode::Add] {
+                let before = vec![0.25f32; width * height];
                 let run = |level: &str| {
-                    let mut out = vec![0.25f32; width * height];
-                    crate::simd::on_level(
-                        level,
-                        ColumnsOp {
-                            src: &src,
-                            dst: &mut out,
-                            width,
-                            window,
-                            filter: &filter,
-                            mode,
-                            step: 1,
-                            scratch: &mut Scratch::default(),
-                        },
-                    );
-                    bits(&out)
+                    bits(&pass_on(
+                        level, &src, &before, width, window, &filter, mode, 1,
+                    ))
                 };
                 let baseline = run("baseline");
                 for level in crate::simd::levels() {
@@ -930,19 +936,16 @@ mod tests {
             let by_level: Vec<(&str, Vec<f32>)> = crate::simd::levels()
                 .into_iter()
                 .map(|level| {
-                    let mut out = vec![0.0f32; kept * width];
-                    crate::simd::on_level(
+                    let zeros = vec![0.0f32; kept * width];
+                    let out = pass_on(
                         level,
-                        ColumnsOp {
-                            src: &src,
-                            dst: &mut out,
-                            width,
-                            window,
-                            filter: &filter,
-                            mode: Mode::Write,
-                            step,
-                            scratch: &mut Scratch::default(),
-                        },
+                        &src,
+                        &zeros,
+                        width,
+                        window,
+                        &filter,
+                        Mode::Write,
+                        step,
                     );
                     (level, out)
                 })
