@@ -355,6 +355,10 @@ pub struct Renderer {
     tile_batch: Vec<u32>,
     /// The batch being tested (starts at 1; `tile_batch` starts at 0).
     batch: u32,
+    /// Whether `depth` holds only [`EMPTY`] and `accum` only zeros (the resolve
+    /// clears what it reads, so that a rendering does not write both buffers whole
+    /// once more before it draws; false while a rendering runs).
+    cleared: bool,
     theta_min: f32,
     theta_max: f32,
 }
@@ -435,6 +439,7 @@ impl Renderer {
             tile_farthest: vec![0; tile_count],
             tile_batch: vec![0; tile_count],
             batch: 0,
+            cleared: true,
             theta_min,
             theta_max,
         })
@@ -506,9 +511,13 @@ impl Renderer {
         self.select_cells(cloud, &view);
         let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
 
-        // Cleared as plain integers (stores the compiler widens, unlike atomic ones).
-        plain::depths(&mut self.depth).fill(EMPTY);
-        plain::sums(&mut self.accum).fill([0; 2]);
+        // The last resolve cleared the buffers, unless it did not run (a panic): then
+        // cleared here, as plain integers (stores the compiler widens, unlike atomic
+        // ones).
+        if !std::mem::replace(&mut self.cleared, false) {
+            plain::depths(&mut self.depth).fill(EMPTY);
+            plain::sums(&mut self.accum).fill([0; 2]);
+        }
         let parallel = self.options.parallel && rayon::current_num_threads() > 1;
         let occlusion = self.options.occlusion_culling && view.undistorted;
         self.splats.resize(candidate_points, Splat::default());
@@ -598,8 +607,8 @@ impl Renderer {
             }
             let r = (y - v0) * width;
             pixels_hit += resolve_row(
-                &depth[r..r + width],
-                &accum[r..r + width],
+                &mut depth[r..r + width],
+                &mut accum[r..r + width],
                 &valid[inside.clone()],
                 background,
                 &mut intensity[inside.clone()],
@@ -607,6 +616,8 @@ impl Renderer {
                 &mut status[inside],
             );
         }
+        // Every row of the region was resolved, hence cleared.
+        self.cleared = true;
         if self.options.fill_holes {
             pixels_hit += self.fill_holes(frame);
         }
@@ -1812,11 +1823,12 @@ impl<'a> Warm<'a> {
 /// Resolve a row of the valid pixels' box: the mean intensity and range of a pixel's
 /// samples if it has some (a hit), the background and an infinite range if it has
 /// none (sky), 0 and NaN outside the valid region (masked). Every pixel's means are
-/// computed, and kept or not, so that the loop has no branch. Returns the hits.
+/// computed, and kept or not, so that the loop has no branch. Returns the hits. Leaves
+/// the row's keys [`EMPTY`] and sums zero, for the next rendering.
 #[inline(always)]
 fn resolve_row(
-    depth: &[u32],
-    accum: &[[u64; 2]],
+    depth: &mut [u32],
+    accum: &mut [[u64; 2]],
     valid: &[bool],
     background: f32,
     intensity: &mut [f32],
@@ -1826,7 +1838,7 @@ fn resolve_row(
     let mut hits = 0;
     let pixels = depth
         .iter()
-        .zip(accum)
+        .zip(accum.iter())
         .zip(valid)
         .zip(intensity.iter_mut())
         .zip(range_m.iter_mut())
@@ -1844,6 +1856,9 @@ fn resolve_row(
         };
         hits += usize::from(valid && hit);
     }
+    // Cleared while the row is in the first level of cache.
+    depth.fill(EMPTY);
+    accum.fill([0; 2]);
     hits
 }
 

@@ -209,6 +209,40 @@ fn rendering_is_deterministic_across_thread_counts() {
     assert!(frames[0].bitwise_eq(&again));
 }
 
+/// A renderer that drew other poses before (its buffers cleared by each resolve, not
+/// before each drawing) gives the fresh renderer's frame, bit for bit, on one thread
+/// and on two.
+#[test]
+fn a_reused_renderer_draws_as_a_fresh_one() {
+    let camera = fixture("omni-320x240.toml");
+    let poses = [
+        camera_looking_down(DVec3::new(-18.0, 1.0, 3.0), 0.2),
+        camera_looking_down(DVec3::new(5.0, -1.0, 1.6), 1.0),
+        camera_looking_down(DVec3::new(-18.0, 1.0, 3.0), 0.2),
+    ];
+    for parallel in [false, true] {
+        let options = RenderOptions {
+            parallel,
+            ..RenderOptions::default()
+        };
+        let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+            .install(|| {
+                for pose in &poses {
+                    let cloud = &default_city().cloud;
+                    renderer.render(cloud, &pose.inverse(), &mut frame).unwrap();
+                    let fresh = render_city(&camera, pose, options);
+                    assert!(fresh.counts().0 > 10_000);
+                    assert!(frame.bitwise_eq(&fresh), "parallel {parallel}, {pose:?}");
+                }
+            });
+    }
+}
+
 /// From street level, no pixel looking below the horizon is a hole, at 640×480, with and
 /// without level of detail.
 #[test]
