@@ -611,7 +611,7 @@ impl Pgm {
         let image = self.brightness.image();
         let sc = &mut self.scratch;
         recursive::columns(image, &mut self.h_g, w, win, &f.g, Mode::Write, sc);
-        recursive::transpose(&self.h_g, &mut self.out, w, h, win);
+        recursive::transpose_f32(&self.h_g, &mut self.out, w, h, win);
         // G = g_rows ⊛ h_g, computed down the columns of the transposed plane.
         recursive::columns(&self.out, &mut self.plane, h, win_t, &f.g, Mode::Write, sc);
         for (v, &t) in self.values.iter_mut().zip(&self.transposed) {
@@ -622,7 +622,7 @@ impl Pgm {
         }
         // J_λ λ³ = (k² g)_rows ⊛ h_g + g_rows ⊛ h_k2g.
         recursive::columns(image, &mut self.h_k2g, w, win, &f.k2g, Mode::Write, sc);
-        recursive::transpose(&self.h_k2g, &mut self.out2, w, h, win);
+        recursive::transpose_f32(&self.h_k2g, &mut self.out2, w, h, win);
         recursive::columns(
             &self.out,
             &mut self.plane,
@@ -714,7 +714,7 @@ impl Pgm {
         recursive::columns(&self.out, &mut self.plane, h, win_t, &f.dg, Mode::Write, sc);
         let image = self.brightness.image();
         recursive::columns(image, &mut self.h_dg, w, win, &f.dg, Mode::Write, sc);
-        recursive::transpose(&self.h_dg, &mut self.out2, w, h, win);
+        recursive::transpose_f32(&self.h_dg, &mut self.out2, w, h, win);
         recursive::columns(&self.out2, &mut self.h_k2g, h, win_t, &f.g, Mode::Write, sc);
         for (g, &t) in self.gradient.iter_mut().zip(&self.transposed) {
             *g = [self.plane[t as usize], self.h_k2g[t as usize]];
