@@ -869,14 +869,14 @@ impl<'a> Servo<'a> {
             if let Some(Robust::Tukey { c }) = self.config.robust {
                 tukey_weights(&self.residuals, c, &mut self.weights, &mut self.scratch);
             }
-            let weight_sum: f64 = self.weights.iter().map(|&w| f64::from(w)).sum();
-            cost = self
-                .residuals
-                .iter()
-                .zip(&self.weights)
-                .map(|(&e, &w)| f64::from(w) * f64::from(e) * f64::from(e))
-                .sum::<f64>()
-                / weight_sum.max(1.0);
+            // Both sums in one loop: each is a chain of dependent additions (in order,
+            // from -0.0 as `Iterator::sum`), and two chains run side by side.
+            let (mut weight_sum, mut weighted) = (-0.0f64, -0.0f64);
+            for (&e, &w) in self.residuals.iter().zip(&self.weights) {
+                weight_sum += f64::from(w);
+                weighted += f64::from(w) * f64::from(e) * f64::from(e);
+            }
+            cost = weighted / weight_sum.max(1.0);
             if !cost.is_finite() {
                 return Ok(StageResult {
                     stop: StopReason::Diverged(Divergence::NotFinite),
