@@ -19,7 +19,8 @@
 //!    the order of addition.
 //! 3. **Resolve.** Intensity and range are the means of the accepted samples;
 //!    pixels with no sample inside the valid region are sky (`background`, infinite
-//!    range), pixels outside it are masked.
+//!    range), pixels outside it are masked. It clears each row of the buffers as it
+//!    reads it, for the next rendering (no pass over the buffers before drawing).
 //!
 //! **Culling and level of detail.** The buffers cover only the smallest rectangle that
 //! holds the camera's valid pixels (the catadioptric disc's box: 71 % of a 640×480
