@@ -411,16 +411,24 @@ impl Pgm {
         k
     }
 
-    /// The recursive filters of `lambda` if the options ask for them at this λ.
-    fn filters(&mut self, lambda: f32) -> Option<Filters> {
+    /// The recursive filters of `lambda` if the options ask for them at this λ: `g`,
+    /// and `k² g` and `(k/λ²) g` if asked for (each a least-squares fit of about 20 µs:
+    /// designed once per λ, and only when a path needs it).
+    fn filters(&mut self, lambda: f32, with_k2g: bool, with_dg: bool) -> Option<Filters> {
         let from = self.options.recursive_from_lambda?;
         if lambda < from {
             return None;
         }
-        let filters = match self.filters {
+        let mut filters = match self.filters {
             Some(f) if f.lambda == lambda => f,
             _ => Filters::new(lambda),
         };
+        if with_k2g && filters.k2g.is_none() {
+            filters.k2g = Some(Recursive::new(Shape::SquaredOffset, lambda));
+        }
+        if with_dg && filters.dg.is_none() {
+            filters.dg = Some(Recursive::new(Shape::Derivative, lambda));
+        }
         self.filters = Some(filters);
         Some(filters)
     }
@@ -429,8 +437,8 @@ impl Pgm {
     pub fn transform(&mut self, picture: &impl AnyImage, lambda: f32) -> Result<&[f32], PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute_pixels(picture)?;
-        if let Some(f) = self.filters(lambda) {
-            self.recursive_g_j(&f, false);
+        if let Some(f) = self.filters(lambda, false, false) {
+            self.recursive_g_j(&f);
             return Ok(&self.values);
         }
         let k = self.kernels(lambda);
@@ -469,8 +477,9 @@ impl Pgm {
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute_pixels(picture)?;
-        if let Some(f) = self.filters(lambda) {
-            self.recursive_g_j(&f, true);
+        let paper = matches!(jacobian, PgmJacobian::Paper { .. });
+        if let Some(f) = self.filters(lambda, true, paper) {
+            self.recursive_g_j(&f);
             match jacobian {
                 PgmJacobian::Convolved => self.recursive_convolved(&f),
                 PgmJacobian::Paper { edge_margin } => {
@@ -601,11 +610,11 @@ impl Pgm {
         }
     }
 
-    /// Recursive path: `G` (and `J_λ` if `with_j`) at the samples. Columns first
+    /// Recursive path: `G` (and `J_λ` if `f` has `k² g`) at the samples. Columns first
     /// (`h_g = g_cols ⊛ I`, `h_k2g = (k² g)_cols ⊛ I`), then the planes are transposed
     /// (into `out`, `out2`) so that the row pass is a column pass too; samples are read
     /// at their transposed index.
-    fn recursive_g_j(&mut self, f: &Filters, with_j: bool) {
+    fn recursive_g_j(&mut self, f: &Filters) {
         let (w, h) = (self.width, self.height);
         let (win, win_t) = (self.window, self.window.transposed());
         let image = self.brightness.image();
@@ -617,21 +626,13 @@ impl Pgm {
         for (v, &t) in self.values.iter_mut().zip(&self.transposed) {
             *v = self.plane[t as usize];
         }
-        if !with_j {
+        let Some(k2g) = f.k2g else {
             return;
-        }
+        };
         // J_λ λ³ = (k² g)_rows ⊛ h_g + g_rows ⊛ h_k2g.
-        recursive::columns(image, &mut self.h_k2g, w, win, &f.k2g, Mode::Write, sc);
+        recursive::columns(image, &mut self.h_k2g, w, win, &k2g, Mode::Write, sc);
         recursive::transpose_f32(&self.h_k2g, &mut self.out2, w, h, win);
-        recursive::columns(
-            &self.out,
-            &mut self.plane,
-            h,
-            win_t,
-            &f.k2g,
-            Mode::Write,
-            sc,
-        );
+        recursive::columns(&self.out, &mut self.plane, h, win_t, &k2g, Mode::Write, sc);
         recursive::columns(&self.out2, &mut self.plane, h, win_t, &f.g, Mode::Add, sc);
         let inv_l3 = 1.0 / (f.lambda * f.lambda * f.lambda);
         for (j, &t) in self.j_lambda.iter_mut().zip(&self.transposed) {
@@ -708,12 +709,15 @@ impl Pgm {
     /// [`Pgm::recursive_g_j`], whose transposed `h_g` is in `out`):
     /// `∂G/∂u = dg_rows ⊛ h_g`, `∂G/∂v = g_rows ⊛ (dg_cols ⊛ I)`.
     fn recursive_gradient(&mut self, f: &Filters) {
+        let Some(dg) = f.dg else {
+            return; // not asked for (compute asks for it on this path)
+        };
         let (w, h) = (self.width, self.height);
         let (win, win_t) = (self.window, self.window.transposed());
         let sc = &mut self.scratch;
-        recursive::columns(&self.out, &mut self.plane, h, win_t, &f.dg, Mode::Write, sc);
+        recursive::columns(&self.out, &mut self.plane, h, win_t, &dg, Mode::Write, sc);
         let image = self.brightness.image();
-        recursive::columns(image, &mut self.h_dg, w, win, &f.dg, Mode::Write, sc);
+        recursive::columns(image, &mut self.h_dg, w, win, &dg, Mode::Write, sc);
         recursive::transpose_f32(&self.h_dg, &mut self.out2, w, h, win);
         recursive::columns(&self.out2, &mut self.h_k2g, h, win_t, &f.g, Mode::Write, sc);
         for (g, &t) in self.gradient.iter_mut().zip(&self.transposed) {
@@ -765,13 +769,14 @@ impl Pgm {
     }
 }
 
-/// The recursive filters of the three kernels at one λ.
+/// The recursive filters of the three kernels at one λ (`k² g` and `(k/λ²) g` once a
+/// path has needed them).
 #[derive(Clone, Copy, Debug)]
 struct Filters {
     lambda: f32,
     g: Recursive,
-    k2g: Recursive,
-    dg: Recursive,
+    k2g: Option<Recursive>,
+    dg: Option<Recursive>,
 }
 
 impl Filters {
@@ -779,8 +784,8 @@ impl Filters {
         Self {
             lambda,
             g: Recursive::new(Shape::Gaussian, lambda),
-            k2g: Recursive::new(Shape::SquaredOffset, lambda),
-            dg: Recursive::new(Shape::Derivative, lambda),
+            k2g: None,
+            dg: None,
         }
     }
 }
