@@ -64,6 +64,17 @@ pub enum SplatError {
         /// Camera height.
         height: u32,
     },
+    /// A frame whose per-pixel buffer does not hold one value per pixel (its fields
+    /// are public, so a caller may have resized one).
+    #[error("the frame's {what} holds {got} values for {expected} pixels")]
+    FrameBuffer {
+        /// Which buffer.
+        what: &'static str,
+        /// Its length.
+        got: usize,
+        /// The frame's pixel count.
+        expected: usize,
+    },
     /// A pose with NaN or infinite components.
     #[error("pose is not finite")]
     NonFinitePose,

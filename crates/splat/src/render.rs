@@ -482,6 +482,20 @@ impl Renderer {
                 height: self.camera.height(),
             });
         }
+        let expected = self.camera.pixel_count();
+        for (what, got) in [
+            ("intensity", frame.intensity.len()),
+            ("range", frame.range_m.len()),
+            ("status", frame.status.len()),
+        ] {
+            if got != expected {
+                return Err(SplatError::FrameBuffer {
+                    what,
+                    got,
+                    expected,
+                });
+            }
+        }
         if !camera_from_world.is_finite() {
             return Err(SplatError::NonFinitePose);
         }
@@ -586,6 +600,7 @@ impl Renderer {
         let depth = plain::depths(&mut self.depth);
         let accum = plain::sums(&mut self.accum);
         let mut pixels_hit = 0;
+        let mut rows_resolved = 0;
         let rows = frame
             .intensity
             .chunks_exact_mut(image_width)
@@ -607,6 +622,7 @@ impl Renderer {
                 continue;
             }
             let r = (y - v0) * width;
+            rows_resolved += 1;
             pixels_hit += resolve_row(
                 &mut depth[r..r + width],
                 &mut accum[r..r + width],
@@ -617,8 +633,9 @@ impl Renderer {
                 &mut status[inside],
             );
         }
-        // Every row of the region was resolved, hence cleared.
-        self.cleared = true;
+        // Every row of the region resolved, hence cleared (`render` checked the frame's
+        // buffers, so all of them are).
+        self.cleared = rows_resolved == height;
         if self.options.fill_holes {
             pixels_hit += self.fill_holes(frame);
         }
@@ -2117,6 +2134,59 @@ mod tests {
     /// The frame drawn into the box of the valid pixels equals, bit for bit, the one
     /// drawn into the whole image (what the box leaves out lands on masked pixels), on
     /// one thread and on several, with and without occlusion culling.
+    /// 40 000 points in a 40 × 40 × 12 m box around the origin (none within 1 m of
+    /// it), random intensities.
+    fn scattered_cloud() -> PointCloud {
+        let mut rng = crate::rng::SplitMix64::new(7);
+        let mut positions = Vec::new();
+        let mut intensities = Vec::new();
+        while positions.len() < 40_000 {
+            let p = glam::DVec3::new(
+                rng.unit() * 40.0 - 20.0,
+                rng.unit() * 40.0 - 20.0,
+                rng.unit() * 12.0 - 4.0,
+            );
+            if p.length() > 1.0 {
+                positions.push(p);
+                intensities.push(rng.unit() as f32);
+            }
+        }
+        PointCloud::from_points(glam::DVec3::ZERO, &positions, &intensities, None, Some(0.2))
+            .unwrap()
+    }
+
+    /// A rendering that did not reach its resolve (its buffers left with stale keys
+    /// and sums, as a panic would leave them) is cleared by the next one, which then
+    /// draws a fresh renderer's frame bit for bit; and the test fails if it is not.
+    #[test]
+    fn a_rendering_left_unfinished_is_cleared_by_the_next() {
+        let (camera, options) = test_setup(80.0, 1.0, 0.0, 0.9, 1.25, 8);
+        let options = RenderOptions {
+            parallel: false,
+            ..options
+        };
+        let cloud = scattered_cloud();
+        let pose = Isometry3::from_pose_vector([0.3, -0.2, 0.1, 0.05, -0.1, 0.2]).unwrap();
+        let render = |renderer: &mut Renderer| {
+            let mut frame = Frame::for_camera(&camera);
+            renderer.render(&cloud, &pose, &mut frame).unwrap();
+            frame
+        };
+        let fresh = render(&mut Renderer::new(camera.clone(), options).unwrap());
+        assert!(fresh.counts().0 > 1_000);
+        let poisoned = |cleared: bool| {
+            let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+            render(&mut renderer);
+            plain::depths(&mut renderer.depth).fill(0);
+            plain::sums(&mut renderer.accum).fill([1, 1]);
+            renderer.cleared = cleared;
+            render(&mut renderer)
+        };
+        assert!(poisoned(false).bitwise_eq(&fresh));
+        // The flag is what clears them: claimed clear, the stale buffers show.
+        assert!(!poisoned(true).bitwise_eq(&fresh));
+    }
+
     #[test]
     fn the_valid_pixels_box_draws_the_frame_of_the_whole_image() {
         let camera = Camera::new(
@@ -2142,23 +2212,7 @@ mod tests {
         assert!(region.len() < 320 * 200, "{region:?}");
         // Points all around the camera, many hidden behind others, some seen only
         // outside the annulus.
-        let mut rng = crate::rng::SplitMix64::new(7);
-        let mut positions = Vec::new();
-        let mut intensities = Vec::new();
-        while positions.len() < 40_000 {
-            let p = glam::DVec3::new(
-                rng.unit() * 40.0 - 20.0,
-                rng.unit() * 40.0 - 20.0,
-                rng.unit() * 12.0 - 4.0,
-            );
-            if p.length() > 1.0 {
-                positions.push(p);
-                intensities.push(rng.unit() as f32);
-            }
-        }
-        let cloud =
-            PointCloud::from_points(glam::DVec3::ZERO, &positions, &intensities, None, Some(0.2))
-                .unwrap();
+        let cloud = scattered_cloud();
         let pose = Isometry3::from_pose_vector([0.3, -0.2, 0.1, 0.05, -0.1, 0.2]).unwrap();
         let whole = Region {
             u0: 0,

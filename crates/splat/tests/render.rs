@@ -300,7 +300,23 @@ fn renderer_rejects_bad_input() {
         renderer.render(&cloud, &Isometry3::IDENTITY, &mut wrong),
         Err(SplatError::FrameSize { .. })
     ));
+    // A frame whose public buffers were resized: refused, and the renderer is left as
+    // it was (it then draws a fresh renderer's frame).
+    let pose = Isometry3::from_pose_vector([0.0, 0.0, 2.0, 0.0, 0.0, 0.0]).unwrap();
+    let mut short = Frame::for_camera(&camera);
+    short.status.pop();
+    assert!(matches!(
+        renderer.render(&cloud, &pose, &mut short),
+        Err(SplatError::FrameBuffer { what: "status", .. })
+    ));
     let mut frame = Frame::for_camera(&camera);
+    renderer.render(&cloud, &pose, &mut frame).unwrap();
+    let mut fresh = Frame::for_camera(&camera);
+    Renderer::new(camera.clone(), RenderOptions::default())
+        .unwrap()
+        .render(&cloud, &pose, &mut fresh)
+        .unwrap();
+    assert!(frame.bitwise_eq(&fresh));
     let nan = Isometry3 {
         translation: DVec3::new(f64::NAN, 0.0, 0.0),
         ..Isometry3::IDENTITY

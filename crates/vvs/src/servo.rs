@@ -871,6 +871,7 @@ impl<'a> Servo<'a> {
             }
             // Both sums in one loop: each is a chain of dependent additions (in order,
             // from -0.0 as `Iterator::sum`), and two chains run side by side.
+            debug_assert_eq!(self.residuals.len(), self.weights.len());
             let (mut weight_sum, mut weighted) = (-0.0f64, -0.0f64);
             for (&e, &w) in self.residuals.iter().zip(&self.weights) {
                 weight_sum += f64::from(w);
