@@ -2131,9 +2131,6 @@ mod tests {
         baseline
     }
 
-    /// The frame drawn into the box of the valid pixels equals, bit for bit, the one
-    /// drawn into the whole image (what the box leaves out lands on masked pixels), on
-    /// one thread and on several, with and without occlusion culling.
     /// 40 000 points in a 40 × 40 × 12 m box around the origin (none within 1 m of
     /// it), random intensities.
     fn scattered_cloud() -> PointCloud {
@@ -2187,6 +2184,9 @@ mod tests {
         assert!(!poisoned(true).bitwise_eq(&fresh));
     }
 
+    /// The frame drawn into the box of the valid pixels equals, bit for bit, the one
+    /// drawn into the whole image (what the box leaves out lands on masked pixels), on
+    /// one thread and on several, with and without occlusion culling.
     #[test]
     fn the_valid_pixels_box_draws_the_frame_of_the_whole_image() {
         let camera = Camera::new(
