@@ -438,7 +438,7 @@ impl Pgm {
         Self::check_lambda(lambda)?;
         self.brightness.compute_pixels(picture)?;
         if let Some(f) = self.filters(lambda, false, false) {
-            self.recursive_g_j(&f);
+            self.recursive_g_j(&f, false);
             return Ok(&self.values);
         }
         let k = self.kernels(lambda);
@@ -479,7 +479,7 @@ impl Pgm {
         self.brightness.compute_pixels(picture)?;
         let paper = matches!(jacobian, PgmJacobian::Paper { .. });
         if let Some(f) = self.filters(lambda, true, paper) {
-            self.recursive_g_j(&f);
+            self.recursive_g_j(&f, true);
             match jacobian {
                 PgmJacobian::Convolved => self.recursive_convolved(&f),
                 PgmJacobian::Paper { edge_margin } => {
@@ -610,11 +610,11 @@ impl Pgm {
         }
     }
 
-    /// Recursive path: `G` (and `J_λ` if `f` has `k² g`) at the samples. Columns first
-    /// (`h_g = g_cols ⊛ I`, `h_k2g = (k² g)_cols ⊛ I`), then the planes are transposed
-    /// (into `out`, `out2`) so that the row pass is a column pass too; samples are read
-    /// at their transposed index.
-    fn recursive_g_j(&mut self, f: &Filters) {
+    /// Recursive path: `G` (and `J_λ` if `with_j`; `f` then has `k² g`) at the samples.
+    /// Columns first (`h_g = g_cols ⊛ I`, `h_k2g = (k² g)_cols ⊛ I`), then the planes
+    /// are transposed (into `out`, `out2`) so that the row pass is a column pass too;
+    /// samples are read at their transposed index.
+    fn recursive_g_j(&mut self, f: &Filters, with_j: bool) {
         let (w, h) = (self.width, self.height);
         let (win, win_t) = (self.window, self.window.transposed());
         let image = self.brightness.image();
@@ -626,7 +626,7 @@ impl Pgm {
         for (v, &t) in self.values.iter_mut().zip(&self.transposed) {
             *v = self.plane[t as usize];
         }
-        let Some(k2g) = f.k2g else {
+        let (true, Some(k2g)) = (with_j, f.k2g) else {
             return;
         };
         // J_λ λ³ = (k² g)_rows ⊛ h_g + g_rows ⊛ h_k2g.
