@@ -27,7 +27,9 @@
 //! Passes run down the columns of a row-major plane, a block of vectors of columns at
 //! a time (two on AVX-512, one on AVX2 and SSE4.2) whose recursion state stays in
 //! registers from the first row to the last (interleaved channels are filtered
-//! together); the caller transposes the plane to filter along its rows. Precision:
+//! together); the caller transposes the plane to filter along its rows. The first
+//! sweep asks for its rows 32 ahead (a plane's width apart, they escape
+//! the hardware prefetchers). Precision:
 //! `f32` arithmetic, `f64` design. The loops run on the widest instruction set found
 //! at run time (AVX-512, AVX2 or SSE4.2 on x86-64), with the same bits on every one,
 //! and the bits of the plain recursion of each column (tested on every level the
@@ -385,6 +387,12 @@ fn sweep<S: pulp::Simd, E: Emit<S>>(
         d1[i] = simd.splat_f32s(c.d1[i]);
         d2[i] = simd.splat_f32s(c.d2[i]);
     }
+    if down {
+        // The first rows, before the sweep asks for each row ahead of itself.
+        for y in r0..(r0 + PREFETCH_ROWS).min(r1) {
+            prefetch_line(src, y * width + x0, n);
+        }
+    }
     // Per section, `older` (y[t − 2]) and `newer` (y[t − 1]); the inputs x[t − 1],
     // x[t − 2].
     let mut older = [[zero; BLOCK]; 3];
@@ -408,11 +416,36 @@ fn sweep<S: pulp::Simd, E: Emit<S>>(
         }
         emit.row(y, sums);
         x2 = x1;
+        if down && y + PREFETCH_ROWS < r1 {
+            prefetch_line(src, (y + PREFETCH_ROWS) * width + x0, n);
+        }
         let line = &src[y * width + x0..][..n];
         for (v, x) in x1.iter_mut().enumerate().take(vectors::<S>()) {
             *x = load(simd, &line[lanes_of::<S>(v, n)]);
         }
     }
+}
+
+/// How many rows ahead a down sweep asks for its input: the rows of a block are a
+/// plane's width apart (a new page each, for interleaved channels), so the hardware
+/// prefetchers do not follow them, and the first sweep reads a plane that an earlier
+/// stage wrote (cold); the second sweep finds the block's rows in cache.
+const PREFETCH_ROWS: usize = 32;
+
+/// Ask for the cache lines of `src[at..at + n]` (`n` ≥ 1): a prefetch instruction per
+/// 64 bytes on x86-64; nothing elsewhere. Only the time depends on it.
+#[inline(always)]
+fn prefetch_line(src: &[f32], at: usize, n: usize) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
+    {
+        let line = &src[at..at + n];
+        for k in (0..n).step_by(16) {
+            safe_arch::prefetch_t0(&line[k]);
+        }
+        safe_arch::prefetch_t0(&line[n - 1]);
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
+    let _ = (src, at, n);
 }
 
 /// Correlate the columns of `window` in the row-major plane `src` (`width` elements
