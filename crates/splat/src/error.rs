@@ -75,6 +75,20 @@ pub enum SplatError {
         /// The frame's pixel count.
         expected: usize,
     },
+    /// A camera whose valid pixels reach farther than the renderer addresses (a
+    /// splat's first column and row are 16-bit signed integers, and projections are
+    /// clamped to ±30 000 pixels before rounding).
+    #[error(
+        "the camera's valid pixels reach column {columns} and row {rows}; the renderer draws at most {max} of each"
+    )]
+    RegionTooLarge {
+        /// One past the last column holding a valid pixel.
+        columns: usize,
+        /// One past the last row holding a valid pixel.
+        rows: usize,
+        /// The most columns and rows the renderer draws.
+        max: usize,
+    },
     /// A pose with NaN or infinite components.
     #[error("pose is not finite")]
     NonFinitePose,

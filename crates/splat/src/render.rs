@@ -51,7 +51,8 @@
 //! in the first level of cache): on AVX-512 or AVX2 where the processor has them (found
 //! at run time, sixteen or eight points per instruction, through `pulp`), else in
 //! explicit SSE2 on x86-64 (through `safe_arch`, four points per instruction), each
-//! splat written whole as four 32-bit words; elsewhere with branch-free arithmetic that
+//! splat written whole as four 32-bit words (a single-pixel splat's first word is its
+//! pixel's index, so that neither pass unpacks a column and a row); elsewhere with branch-free arithmetic that
 //! the compiler vectorises; then it scatters their splats. Every kernel gives the same
 //! bits.
 //! The points 512 ahead in the draw list are prefetched, a few cache lines per block
@@ -386,6 +387,14 @@ impl Renderer {
         region: Region,
     ) -> Result<Self, SplatError> {
         options.validate()?;
+        let (columns, rows) = (region.u0 + region.width, region.v0 + region.height);
+        if columns > MAX_EXTENT_PX || rows > MAX_EXTENT_PX {
+            return Err(SplatError::RegionTooLarge {
+                columns,
+                rows,
+                max: MAX_EXTENT_PX,
+            });
+        }
         let n = region.len();
         // The range of angles off the optical axis seen by the valid pixels, widened by
         // a pixel's angle.
@@ -1034,9 +1043,12 @@ fn draw_depth(
 }
 
 /// A projected point, written by pass 1 and read by pass 2: four 32-bit words
-/// `[first column | first row << 16, width | intensity << 16, range, band limit]` (16
-/// bytes, so that the vector kernel writes it whole and a copy is one move). The first
-/// column and row are those of the splat's top-left pixel; the width is
+/// `[where, width | intensity << 16, range, band limit]` (16 bytes, so that the vector
+/// kernel writes it whole and a copy is one move). `where` is, for a single-pixel
+/// splat (most of them), the index of its pixel in the region, row by row (the passes
+/// read it without unpacking a column and a row and multiplying), and for a wider
+/// splat `first column | first row << 16` of its top-left pixel (16-bit two's
+/// complement each: it may start left of or above the region). The width is
 /// [`NOT_DRAWN`] if the point is not seen (then the other fields are meaningless); the
 /// intensity is in 16-bit fixed point; the range and its [`band_limit`] in metres, as
 /// `f32` bits.
@@ -1045,10 +1057,25 @@ fn draw_depth(
 struct Splat([u32; 4]);
 
 impl Splat {
+    /// The splat whose top-left pixel is at column `iu` and row `iv` of a region
+    /// `region_width` pixels wide.
     #[inline(always)]
-    fn new(iu: i32, iv: i32, width: i32, intensity: i32, range_m: f32, limit_m: f32) -> Self {
+    fn new(
+        [iu, iv, region_width]: [i32; 3],
+        width: i32,
+        intensity: i32,
+        range_m: f32,
+        limit_m: f32,
+    ) -> Self {
+        // Wrapping: a point that is not seen may have any column and row (its word is
+        // then meaningless).
+        let at = if width == 1 {
+            iv.wrapping_mul(region_width).wrapping_add(iu) as u32
+        } else {
+            (iu as u32 & 0xFFFF) | ((iv as u32) << 16)
+        };
         Self([
-            (iu as u32 & 0xFFFF) | ((iv as u32) << 16),
+            at,
             (width as u32 & 0xFFFF) | ((intensity as u32) << 16),
             range_m.to_bits(),
             limit_m.to_bits(),
@@ -1057,14 +1084,16 @@ impl Splat {
 
     /// A point that is not seen.
     fn not_drawn() -> Self {
-        Self::new(0, 0, i32::from(NOT_DRAWN), 0, 0.0, 0.0)
+        Self::new([0, 0, 0], i32::from(NOT_DRAWN), 0, 0.0, 0.0)
     }
 
+    /// The first column (of a splat wider than a pixel).
     #[inline(always)]
     fn iu(&self) -> i32 {
         i32::from(self.0[0] as u16 as i16)
     }
 
+    /// The first row (of a splat wider than a pixel).
     #[inline(always)]
     fn iv(&self) -> i32 {
         i32::from((self.0[0] >> 16) as u16 as i16)
@@ -1098,6 +1127,12 @@ impl Splat {
 }
 
 const NOT_DRAWN: u16 = u16::MAX;
+
+/// The most columns and rows of a camera's image that the renderer draws: a splat's
+/// first column and row are 16-bit signed integers ([`Splat`]), projections are
+/// clamped to ±30 000 pixels before rounding ([`first_px`]), and splats are at most
+/// about 2000 pixels wide; 16 384 keeps clear of all three.
+const MAX_EXTENT_PX: usize = 16_384;
 
 /// Split the draw list into runs of about `target` points.
 fn chunk_cells(cells: &[DrawCell], target: usize) -> Vec<&[DrawCell]> {
@@ -1176,8 +1211,7 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
         return None;
     }
     Some(Splat::new(
-        iu,
-        iv,
+        [iu, iv, view.width],
         width,
         i32::from((p[3] * INTENSITY_SCALE + 0.5) as u16),
         rho,
@@ -1228,10 +1262,9 @@ struct Lanes<const N: usize> {
 #[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
 impl<const N: usize> Lanes<N> {
     /// The splat of point `k`.
-    fn splat(&self, k: usize) -> Splat {
+    fn splat(&self, k: usize, view: &View) -> Splat {
         Splat::new(
-            self.iu[k],
-            self.iv[k],
+            [self.iu[k], self.iv[k], view.width],
             self.width[k],
             self.intensity[k],
             self.range[k],
@@ -1499,7 +1532,7 @@ impl Depths for &mut [u32] {
         let (key, limit) = (s.0[2], s.limit_m());
         // Most splats: a single pixel, decided first (before the 3 × 3 test).
         if s.width() == 1 {
-            let k = s.single_pixel(view);
+            let k = s.single_pixel();
             let before = self[k];
             self[k] = key.min(before);
             return !(f32::from_bits(before) < limit);
@@ -1583,7 +1616,7 @@ fn project_block<const N: usize>(
         let mut lanes = Lanes::<N>::new();
         project_lanes_portable(points, footprint, view, &mut lanes);
         for (k, out) in out.iter_mut().enumerate() {
-            *out = lanes.splat(k);
+            *out = lanes.splat(k, view);
         }
     }
 }
@@ -1634,10 +1667,10 @@ fn project_lanes_portable<const N: usize>(
 
 impl Splat {
     /// The pixel of a single-pixel splat (drawn splats reach the image, and one pixel
-    /// wide they are inside it).
+    /// wide they are inside it): its index in the region.
     #[inline(always)]
-    fn single_pixel(&self, view: &View) -> usize {
-        self.iv() as usize * view.width as usize + self.iu() as usize
+    fn single_pixel(&self) -> usize {
+        self.0[0] as usize
     }
 
     /// The top-left pixel of a 3 × 3 splat inside the image whose rows can be read
@@ -1666,7 +1699,7 @@ impl Splat {
         let (iu, iv, n) = (self.iu(), self.iv(), i32::from(self.width()));
         if n == 1 {
             // Most splats: a single pixel, inside the image.
-            f(self.single_pixel(view));
+            f(self.single_pixel());
             return;
         }
         if n == 3 && iu >= 0 && iv >= 0 && iu + 3 <= view.width && iv + 3 <= view.height {
@@ -1923,7 +1956,7 @@ fn accumulate_own(
         let (sample, range_sample) = samples(s);
         let limit = s.limit_m();
         if s.width() == 1 {
-            let k = s.single_pixel(view);
+            let k = s.single_pixel();
             let keep = 0u64.wrapping_sub(u64::from(f32::from_bits(depth[k]) >= limit));
             let sums = &mut accum[k];
             *sums = [sums[0] + (sample & keep), sums[1] + (range_sample & keep)];
@@ -2473,7 +2506,7 @@ mod tests {
             let mut lanes = Lanes::<BLOCK>::new();
             project_lanes_portable(&points, footprint, &view, &mut lanes);
             for (k, got) in block.iter().enumerate() {
-                let portable = lanes.splat(k);
+                let portable = lanes.splat(k, &view);
                 prop_assert_eq!(portable.drawn(), got.drawn());
                 if got.drawn() {
                     prop_assert_eq!(portable, *got);

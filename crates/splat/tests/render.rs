@@ -335,6 +335,30 @@ fn renderer_rejects_bad_input() {
         )
         .is_err()
     );
+    // A camera wider than a splat's 16-bit column can address.
+    let wide = ucm::Camera::new(
+        ucm::Intrinsics {
+            alpha_u: 100.0,
+            alpha_v: 100.0,
+            u0: 20_000.0,
+            v0: 2.0,
+            xi: 0.9,
+            skew: 0.0,
+        },
+        None,
+        40_000,
+        4,
+        ucm::ValidRegion::Full,
+    )
+    .unwrap();
+    assert!(matches!(
+        Renderer::new(wide, RenderOptions::default()),
+        Err(SplatError::RegionTooLarge {
+            columns: 40_000,
+            rows: 4,
+            max: 16_384
+        })
+    ));
     // Empty and non-finite clouds cannot be built.
     assert!(matches!(
         PointCloud::from_points(DVec3::ZERO, &[], &[], None, None),

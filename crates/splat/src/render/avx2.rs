@@ -109,6 +109,10 @@ impl Vectors for Ops {
         self.0.avx2._mm256_slli_epi32::<16>(a)
     }
     #[inline(always)]
+    fn mul_u16(self, a: __m256i, b: __m256i) -> __m256i {
+        self.0.avx2._mm256_mullo_epi32(a, b)
+    }
+    #[inline(always)]
     fn bits(self, a: __m256) -> __m256i {
         self.0.avx._mm256_castps_si256(a)
     }

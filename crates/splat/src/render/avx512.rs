@@ -121,6 +121,10 @@ impl Vectors for Ops {
         self.0.avx512f._mm512_slli_epi32::<16>(a)
     }
     #[inline(always)]
+    fn mul_u16(self, a: __m512i, b: __m512i) -> __m512i {
+        self.0.avx512f._mm512_mullo_epi32(a, b)
+    }
+    #[inline(always)]
     fn bits(self, a: __m512) -> __m512i {
         self.0.avx512f._mm512_castps_si512(a)
     }

@@ -38,6 +38,8 @@ pub(super) trait Vectors: Copy {
     fn and_i(self, a: Self::I, b: Self::I) -> Self::I;
     fn or_i(self, a: Self::I, b: Self::I) -> Self::I;
     fn shl16(self, a: Self::I) -> Self::I;
+    /// `a · b` in the lanes where `0 ≤ a, b < 2^16` (anything elsewhere).
+    fn mul_u16(self, a: Self::I, b: Self::I) -> Self::I;
     /// The float's bits.
     fn bits(self, a: Self::F) -> Self::I;
     /// The integer converted to a float.
@@ -164,7 +166,8 @@ impl<V: Vectors> Constants<V> {
 }
 
 /// The four words of the splats of one register of points (given as their `x`, `y`,
-/// `z` and grey level), one register per word: `iu | iv << 16`,
+/// `z` and grey level), one register per word: the pixel's index in the region for a
+/// single-pixel splat, else `iu | iv << 16`,
 /// `width | intensity << 16`, the range's bits and its band limit's bits.
 #[inline(always)]
 pub(super) fn splat_words<V: Vectors>(
@@ -220,6 +223,13 @@ pub(super) fn splat_words<V: Vectors>(
         o.and_m(o.gt_i(c.width, pu), o.gt_i(c.height, pv)),
     );
     let seen = o.and_m(in_domain, in_image);
+    // A single-pixel splat (half-width 0) that is seen lies inside the region: its
+    // pixel's index; a wider one, its first column and row.
+    let at = o.select(
+        o.gt_i(c.one_i, half),
+        o.add_i(o.mul_u16(pv, c.width), pu),
+        o.or_i(o.and_i(pu, c.low_half), o.shl16(pv)),
+    );
     let intensity = floor_small(
         o,
         limit(
@@ -230,7 +240,7 @@ pub(super) fn splat_words<V: Vectors>(
         ),
     );
     [
-        o.or_i(o.and_i(pu, c.low_half), o.shl16(pv)),
+        at,
         o.or_i(
             o.and_i(o.select(seen, n, c.not_drawn), c.low_half),
             o.shl16(intensity),

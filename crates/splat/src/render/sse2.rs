@@ -102,6 +102,15 @@ impl Vectors for Ops {
         shl_imm_u32_m128i::<16>(a)
     }
     #[inline(always)]
+    fn mul_u16(self, a: m128i, b: m128i) -> m128i {
+        // SSE2 has no 32-bit product: with both factors in the low halves (the high
+        // halves zero), the low and high halves of their 16-bit product.
+        bitor_m128i(
+            mul_i16_keep_low_m128i(a, b),
+            shl_imm_u32_m128i::<16>(mul_u16_keep_high_m128i(a, b)),
+        )
+    }
+    #[inline(always)]
     fn bits(self, a: m128) -> m128i {
         cast_to_m128i_from_m128(a)
     }
