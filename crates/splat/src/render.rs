@@ -347,8 +347,10 @@ pub struct Renderer {
     draw: Vec<DrawCell>,
     splats: Vec<Splat>,
     status: Vec<PixelStatus>,
-    /// Per pixel of the region: all ones where valid, zero where masked (masked pixels
-    /// never keep a cell from being culled).
+    /// Per pixel of the region: all ones where valid, zero where masked. A cleared
+    /// key is `EMPTY & valid_bits`: a masked pixel keeps the key 0 (the nearest range)
+    /// through every rendering, so that it never keeps a cell from being culled and
+    /// no splat is kept for it alone (the resolve masks it whatever it holds).
     valid_bits: Vec<u32>,
     /// Per tile of `TILE × TILE` pixels: the farthest key of its valid pixels (as in
     /// [`Renderer::occluded`]) when `tile_batch` equals the batch being tested, else
@@ -357,7 +359,7 @@ pub struct Renderer {
     tile_batch: Vec<u32>,
     /// The batch being tested (starts at 1; `tile_batch` starts at 0).
     batch: u32,
-    /// Whether `depth` holds only [`EMPTY`] and `accum` only zeros (the resolve
+    /// Whether `depth` holds only cleared keys and `accum` only zeros (the resolve
     /// clears what it reads, so that a rendering does not write both buffers whole
     /// once more before it draws; false while a rendering runs).
     cleared: bool,
@@ -425,7 +427,7 @@ impl Renderer {
         };
         let tile_count = tiles(region.width) * tiles(region.height);
         let valid = camera.valid_pixels();
-        let valid_bits = (0..n)
+        let valid_bits: Vec<u32> = (0..n)
             .map(|k| {
                 let (u, v) = (region.u0 + k % region.width, region.v0 + k / region.width);
                 if valid[v * w + u] { u32::MAX } else { 0 }
@@ -436,7 +438,10 @@ impl Renderer {
             camera,
             options,
             region,
-            depth: (0..n).map(|_| AtomicU32::new(EMPTY)).collect(),
+            depth: valid_bits
+                .iter()
+                .map(|&v| AtomicU32::new(EMPTY & v))
+                .collect(),
             accum: (0..n)
                 .map(|_| [AtomicU64::new(0), AtomicU64::new(0)])
                 .collect(),
@@ -539,7 +544,12 @@ impl Renderer {
         // cleared here, as plain integers (stores the compiler widens, unlike atomic
         // ones).
         if !std::mem::replace(&mut self.cleared, false) {
-            plain::depths(&mut self.depth).fill(EMPTY);
+            for (key, &valid) in plain::depths(&mut self.depth)
+                .iter_mut()
+                .zip(&self.valid_bits)
+            {
+                *key = EMPTY & valid;
+            }
             plain::sums(&mut self.accum).fill([0; 2]);
         }
         let parallel = self.options.parallel && rayon::current_num_threads() > 1;
@@ -792,14 +802,11 @@ impl Renderer {
         if hidden_by_tiles {
             return true;
         }
+        // Masked pixels hold the key 0: they never raise the farthest.
         let mut farthest = 0u32;
         for row in v0..=v1 {
             let depth = &mut self.depth[row * w + u0..=row * w + u1];
-            let valid = &self.valid_bits[row * w + u0..=row * w + u1];
-            farthest = depth
-                .iter_mut()
-                .zip(valid)
-                .fold(farthest, |f, (d, v)| f.max(*d.get_mut() & v));
+            farthest = depth.iter_mut().fold(farthest, |f, d| f.max(*d.get_mut()));
             // The farthest range only grows: stop at the first row that decides.
             if !hides(farthest) {
                 return false;
@@ -818,11 +825,7 @@ impl Renderer {
             let mut farthest = 0u32;
             for row in tv * TILE..((tv + 1) * TILE).min(h) {
                 let depth = &mut self.depth[row * w + u0..row * w + u1];
-                let valid = &self.valid_bits[row * w + u0..row * w + u1];
-                farthest = depth
-                    .iter_mut()
-                    .zip(valid)
-                    .fold(farthest, |f, (d, v)| f.max(*d.get_mut() & v));
+                farthest = depth.iter_mut().fold(farthest, |f, d| f.max(*d.get_mut()));
             }
             self.tile_farthest[index] = farthest;
             self.tile_batch[index] = self.batch;
@@ -1875,7 +1878,8 @@ impl<'a> Warm<'a> {
 /// samples if it has some (a hit), the background and an infinite range if it has
 /// none (sky), 0 and NaN outside the valid region (masked). Every pixel's means are
 /// computed, and kept or not, so that the loop has no branch. Returns the hits. Leaves
-/// the row's keys [`EMPTY`] and sums zero, for the next rendering.
+/// the row's keys cleared ([`EMPTY`], 0 at masked pixels: `Renderer::valid_bits`) and
+/// its sums zero, for the next rendering.
 #[inline(always)]
 fn resolve_row(
     depth: &mut [u32],
@@ -1908,7 +1912,9 @@ fn resolve_row(
         hits += usize::from(valid && hit);
     }
     // Cleared while the row is in the first level of cache.
-    depth.fill(EMPTY);
+    for (key, &valid) in depth.iter_mut().zip(valid) {
+        *key = if valid { EMPTY } else { 0 };
+    }
     accum.fill([0; 2]);
     hits
 }

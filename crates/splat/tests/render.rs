@@ -243,6 +243,96 @@ fn a_reused_renderer_draws_as_a_fresh_one() {
     }
 }
 
+/// Masked pixels change nothing elsewhere: with square holes punched into the valid
+/// region (away from its rims, so that the field of view and the pixel box stay the
+/// same), every pixel that stays valid is drawn bit for bit as without the holes
+/// (hole filling off: its rule differs at the edge of the valid region), on one thread and on two, by a renderer that drew another pose
+/// before (the renderer holds masked pixels at the nearest range, so that they hide
+/// every cell, and its resolve restores them: a mistake there would leak into valid
+/// pixels), and every pixel of a hole is masked.
+#[test]
+fn masked_pixels_change_nothing_elsewhere() {
+    let camera = fixture("omni-320x240.toml");
+    let (w, h) = (camera.width() as usize, camera.height() as usize);
+    let valid = camera.valid_pixels();
+    let inside = |u: usize, v: usize, r: usize| {
+        u >= r
+            && v >= r
+            && u + r < w
+            && v + r < h
+            && (v - r..=v + r).all(|y| (u - r..=u + r).all(|x| valid[y * w + x]))
+    };
+    // 9 × 9 holes on a 31-pixel grid, wherever one fits with a margin of 4 valid pixels.
+    let mut holed = valid.to_vec();
+    let mut holes = 0;
+    for v in (15..h).step_by(31) {
+        for u in (15..w).step_by(31) {
+            if inside(u, v, 8) {
+                holes += 1;
+                for y in v - 4..=v + 4 {
+                    holed[y * w + u - 4..=y * w + u + 4].fill(false);
+                }
+            }
+        }
+    }
+    assert!(holes >= 20, "{holes} holes");
+    let holed_camera = ucm::Camera::new(
+        *camera.intrinsics(),
+        camera.distortion().copied(),
+        w as u32,
+        h as u32,
+        ucm::ValidRegion::Mask(ucm::Mask::new(w as u32, h as u32, holed.clone()).unwrap()),
+    )
+    .unwrap();
+    let pose = camera_looking_down(DVec3::new(-18.0, 1.0, 3.0), 0.2);
+    for parallel in [false, true] {
+        // Without hole filling, whose rule at the valid region's edge differs.
+        let options = RenderOptions {
+            parallel,
+            fill_holes: false,
+            ..RenderOptions::default()
+        };
+        let (whole, with_holes) = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+            .install(|| {
+                // The holed camera's renderer draws another pose first: its
+                // buffers are then the ones the resolve left.
+                let mut renderer = Renderer::new(holed_camera.clone(), options).unwrap();
+                let mut frame = Frame::for_camera(&holed_camera);
+                let cloud = &default_city().cloud;
+                for p in [camera_looking_down(DVec3::new(5.0, -1.0, 1.6), 1.0), pose] {
+                    renderer.render(cloud, &p.inverse(), &mut frame).unwrap();
+                }
+                (render_city(&camera, &pose, options), frame)
+            });
+        let mut compared = 0;
+        for v in 0..h {
+            for u in 0..w {
+                let k = v * w + u;
+                if !holed[k] {
+                    assert_eq!(with_holes.status[k], PixelStatus::Masked);
+                    continue;
+                }
+                compared += 1;
+                assert_eq!(whole.status[k], with_holes.status[k], "pixel ({u}, {v})");
+                assert_eq!(
+                    whole.intensity[k].to_bits(),
+                    with_holes.intensity[k].to_bits(),
+                    "pixel ({u}, {v})"
+                );
+                assert_eq!(
+                    whole.range_m[k].to_bits(),
+                    with_holes.range_m[k].to_bits(),
+                    "pixel ({u}, {v})"
+                );
+            }
+        }
+        assert!(compared > 30_000, "{compared} pixels compared");
+    }
+}
+
 /// From street level, no pixel looking below the horizon is a hole, at 640×480, with and
 /// without level of detail.
 #[test]
