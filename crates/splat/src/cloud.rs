@@ -1,11 +1,16 @@
 //! [`PointCloud`]: points laid out for rendering speed.
 //!
-//! * Positions are `f32` relative to an `f64` origin, so that georeferenced clouds
-//!   (coordinates of 10⁵–10⁶ m) keep millimetre precision.
-//! * Each point carries one intensity in `[0, 1]`, the luminance of its colour
-//!   (Rec. 709 weights on the stored, gamma-encoded values:
-//!   `0.2126 R + 0.7152 G + 0.0722 B`), interleaved with its position (`[x, y, z, i]`,
-//!   16 bytes) so that the renderer streams one array.
+//! * Points are grouped into cubic cells (visibility culling and level of detail), and
+//!   each point is stored in 8 bytes ([`PackedPoint`]): its position as three 16-bit
+//!   steps from its cell's corner (a step is [`PointCloud::step_m`], the cell's edge
+//!   over 65 535: 31 µm in the default 2 m cells), its intensity in 16-bit fixed point.
+//!   The corners are `f64` relative to an `f64` origin, so that a georeferenced cloud
+//!   (coordinates of 10⁵–10⁶ m) keeps the same precision everywhere. Half the bytes of
+//!   `f32` positions: the renderer reads every point it draws from memory, and a cloud
+//!   of a city (millions of points) does not fit in the processor's caches.
+//! * The intensity is in `[0, 1]`, the luminance of the point's colour (Rec. 709
+//!   weights on the stored, gamma-encoded values: `0.2126 R + 0.7152 G + 0.0722 B`),
+//!   rounded to 1/65 535 (the renderer's own fixed point).
 //! * Points are grouped into cubic cells (visibility culling and level of detail). The
 //!   order of the points is therefore **not** the input order: it is sorted by cell and,
 //!   within a cell, shuffled deterministically so that any prefix of a cell is a uniform
@@ -22,6 +27,18 @@ pub fn luminance(rgb: [u8; 3]) -> f32 {
     (0.2126 * f32::from(rgb[0]) + 0.7152 * f32::from(rgb[1]) + 0.0722 * f32::from(rgb[2])) / 255.0
 }
 
+/// One point as the renderer reads it (8 bytes): its position as steps of
+/// [`PointCloud::step_m`] from its cell's [`Cell::corner_m`] along x, y and z, and its
+/// intensity in 16-bit fixed point (`intensity / 65535`, in `[0, 1]`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C, align(8))]
+pub struct PackedPoint {
+    /// Steps from the cell's corner along x, y, z.
+    pub steps: [u16; 3],
+    /// Intensity, `65535` for 1.
+    pub intensity: u16,
+}
+
 /// A group of consecutive points of the cloud inside one cubic cell.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cell {
@@ -29,6 +46,9 @@ pub struct Cell {
     pub start: u32,
     /// Number of points.
     pub len: u32,
+    /// The cell's lowest corner, relative to the cloud's origin: its points lie at
+    /// `corner_m + steps · step_m`.
+    pub corner_m: [f64; 3],
     /// Centre of the bounding sphere, relative to the cloud's origin.
     pub center: [f32; 3],
     /// Radius of the bounding sphere, metres.
@@ -39,15 +59,21 @@ pub struct Cell {
 #[derive(Clone, Debug)]
 pub struct PointCloud {
     origin: DVec3,
-    points: Vec<[f32; 4]>,
+    points: Vec<PackedPoint>,
     colors: Option<Vec<[u8; 3]>>,
     cells: Vec<Cell>,
     spacing_m: f32,
     cell_size_m: f32,
+    /// The cell's edge over 65 535.
+    step_m: f64,
 }
 
-/// Largest distance (along any axis) of a point from the cloud's origin, metres:
-/// positions are `f32` relative to the origin, whose spacing there is 6 cm.
+/// Steps along a cell's edge: positions are rounded to the edge over this.
+const STEPS: f64 = 65_535.0;
+
+/// Largest distance (along any axis) of a point from the cloud's origin, metres: the
+/// cells' centres (culling) are `f32` relative to the origin, whose spacing there is
+/// 6 cm (the points themselves are exact to a step everywhere).
 pub const MAX_OFFSET_M: f64 = 1e6;
 
 /// Default edge of the culling / level-of-detail cells, metres.
@@ -137,7 +163,7 @@ impl PointCloud {
                     name: "positions",
                     message: format!(
                         "point {index} at {p} lies {offset:.3e} m from the origin {origin}; \
-                         positions are stored in f32 relative to the origin and must stay \
+                         cells are located in f32 relative to the origin and must stay \
                          within {MAX_OFFSET_M:.0e} m of it"
                     ),
                 });
@@ -175,26 +201,31 @@ impl PointCloud {
             .collect();
         order.sort_unstable();
 
+        let cell_m = f64::from(cell_size_m);
+        let step_m = cell_m / STEPS;
         let mut points = Vec::with_capacity(n);
         let mut sorted_colors = colors.as_ref().map(|_| Vec::with_capacity(n));
         let mut cells = Vec::new();
         let mut start = 0usize;
         while start < n {
             let k = (order[start].0, order[start].1, order[start].2);
+            let corner = DVec3::new(k.0 as f64, k.1 as f64, k.2 as f64) * cell_m;
             let mut end = start;
             let mut lo = DVec3::splat(f64::INFINITY);
             let mut hi = DVec3::splat(f64::NEG_INFINITY);
             while end < n && (order[end].0, order[end].1, order[end].2) == k {
                 let i = order[end].4 as usize;
-                let p = positions[i] - origin;
+                // Rounded to a step (clamped: the cell's key was floored in f64).
+                let steps = ((positions[i] - origin - corner) / step_m)
+                    .round()
+                    .clamp(DVec3::ZERO, DVec3::splat(STEPS));
+                let p = corner + steps * step_m;
                 lo = lo.min(p);
                 hi = hi.max(p);
-                points.push([
-                    p.x as f32,
-                    p.y as f32,
-                    p.z as f32,
-                    intensities[i].clamp(0.0, 1.0),
-                ]);
+                points.push(PackedPoint {
+                    steps: steps.to_array().map(|s| s as u16),
+                    intensity: fixed_intensity(intensities[i]),
+                });
                 if let (Some(out), Some(c)) = (&mut sorted_colors, &colors) {
                     out.push(c[i]);
                 }
@@ -204,6 +235,7 @@ impl PointCloud {
             cells.push(Cell {
                 start: start as u32,
                 len: (end - start) as u32,
+                corner_m: corner.to_array(),
                 center: center.as_vec3().to_array(),
                 radius: ((hi - lo).length() * 0.5) as f32 + 1e-3,
             });
@@ -216,6 +248,7 @@ impl PointCloud {
             cells,
             spacing_m: 0.0,
             cell_size_m,
+            step_m,
         };
         cloud.spacing_m = match spacing_m {
             Some(s) => s,
@@ -237,14 +270,19 @@ impl PointCloud {
             let cell = cells[rng.below(cells.len() as u64) as usize];
             let range = cell.start as usize..(cell.start + cell.len.min(4096)) as usize;
             let pts = &self.points[range];
-            let a = pts[rng.below(pts.len() as u64) as usize];
+            let a = pts[rng.below(pts.len() as u64) as usize].steps;
+            // Squared distances in steps (exact integers).
             let best = pts
                 .iter()
-                .map(|b| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2))
-                .filter(|&d| d > 0.0)
-                .fold(f32::INFINITY, f32::min);
-            if best.is_finite() {
-                distances.push(best.sqrt());
+                .map(|b| {
+                    (0..3)
+                        .map(|k| (i64::from(a[k]) - i64::from(b.steps[k])).pow(2))
+                        .sum::<i64>()
+                })
+                .filter(|&d| d > 0)
+                .min();
+            if let Some(best) = best {
+                distances.push(((best as f64).sqrt() * self.step_m) as f32);
             }
         }
         if distances.is_empty() {
@@ -269,9 +307,44 @@ impl PointCloud {
         self.origin
     }
 
-    /// Points as `[x, y, z, intensity]`, positions relative to [`PointCloud::origin`].
-    pub fn points(&self) -> &[[f32; 4]] {
+    /// The points as the renderer reads them, cell after cell ([`PointCloud::cells`]).
+    pub fn points(&self) -> &[PackedPoint] {
         &self.points
+    }
+
+    /// The step of the points' positions, metres: a cell's edge over 65 535.
+    pub fn step_m(&self) -> f64 {
+        self.step_m
+    }
+
+    /// Every point as its position relative to [`PointCloud::origin`] and its
+    /// intensity in `[0, 1]`, in point order.
+    pub fn decoded(&self) -> impl Iterator<Item = (DVec3, f32)> + '_ {
+        self.cells.iter().flat_map(move |cell| {
+            let range = cell.start as usize..(cell.start + cell.len) as usize;
+            self.points[range].iter().map(move |p| self.decode(cell, p))
+        })
+    }
+
+    /// Point `i`'s position relative to [`PointCloud::origin`] and its intensity
+    /// (`None` past the last point).
+    pub fn point(&self, i: usize) -> Option<(DVec3, f32)> {
+        let p = self.points.get(i)?;
+        // The last cell starting at or before `i`.
+        let cell = &self.cells[self.cells.partition_point(|c| c.start as usize <= i) - 1];
+        Some(self.decode(cell, p))
+    }
+
+    fn decode(&self, cell: &Cell, p: &PackedPoint) -> (DVec3, f32) {
+        let steps = DVec3::new(
+            f64::from(p.steps[0]),
+            f64::from(p.steps[1]),
+            f64::from(p.steps[2]),
+        );
+        (
+            DVec3::from_array(cell.corner_m) + steps * self.step_m,
+            f32::from(p.intensity) / 65535.0,
+        )
     }
 
     /// Per-point 8-bit colours, if the source had colour.
@@ -301,21 +374,26 @@ impl PointCloud {
         Ok(())
     }
 
-    /// World position of point `i`.
+    /// World position of point `i` (panics past the last point).
     pub fn world_position(&self, i: usize) -> DVec3 {
-        let p = self.points[i];
-        self.origin + DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+        let (p, _) = self.point(i).expect("a point of the cloud");
+        self.origin + p
     }
 
-    /// Axis-aligned bounds `(min, max)` in world coordinates.
+    /// Axis-aligned bounds `(min, max)` of the points, in world coordinates.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        let mut lo = glam::Vec3::splat(f32::INFINITY);
-        let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
-        for p in &self.points {
-            let v = glam::Vec3::new(p[0], p[1], p[2]);
-            lo = lo.min(v);
-            hi = hi.max(v);
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for (p, _) in self.decoded() {
+            lo = lo.min(p);
+            hi = hi.max(p);
         }
-        (self.origin + lo.as_dvec3(), self.origin + hi.as_dvec3())
+        (self.origin + lo, self.origin + hi)
     }
+}
+
+/// An intensity in `[0, 1]` (clamped) in 16-bit fixed point, rounded as the renderer
+/// rounds it (`⌊65535 i + 0.5⌋` in `f32`).
+fn fixed_intensity(intensity: f32) -> u16 {
+    (intensity.clamp(0.0, 1.0) * 65535.0 + 0.5) as u16
 }

@@ -451,12 +451,12 @@ pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), Splat
     };
     let header = builder.into_header().map_err(&err)?;
     let mut writer = las::Writer::from_path(path, header).map_err(&err)?;
-    for (i, p) in cloud.points().iter().enumerate() {
+    for (i, (p, intensity)) in cloud.decoded().enumerate() {
         let rgb = match cloud.colors() {
             Some(c) => c[i],
-            None => [(p[3] * 255.0).round() as u8; 3],
+            None => [(intensity * 255.0).round() as u8; 3],
         };
-        let w = cloud.world_position(i);
+        let w = cloud.origin() + p;
         let point = las::Point {
             x: w.x,
             y: w.y,

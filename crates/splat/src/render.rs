@@ -43,8 +43,11 @@
 //! drawn, with proportionally larger splats. The subsample size varies with the pose
 //! one point at a time, so the rendering stays (almost) continuous in the pose.
 //!
-//! Precision: `f32` throughout the per-point loop (positions relative to the cloud's
-//! origin, ranges of at most a few hundred metres).
+//! Precision: `f32` throughout the per-point loop. A point is read as its 16-bit steps
+//! from its cell's corner ([`crate::PackedPoint`], 8 bytes: half the memory traffic of
+//! `f32` positions), and projected through one transform per cell: the rotation times
+//! the step, and the corner in the camera frame, computed in `f64` and rounded once per
+//! cell (ranges of at most a few hundred metres).
 //!
 //! Speed: pass 1 projects the points of a camera without lens distortion 64 at a time
 //! (a cell's last points by smaller padded blocks, 256 at most into a buffer that stays
@@ -71,13 +74,13 @@
 
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
-use glam::{Mat3, Vec3};
+use glam::{DMat3, DVec3, Mat3, Vec3};
 use rayon::prelude::*;
 use ucm::{Camera, Isometry3};
 
 use frame::{Frame, PixelStatus};
 
-use crate::{PointCloud, SplatError};
+use crate::{PackedPoint, PointCloud, SplatError};
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -188,6 +191,8 @@ struct DrawCell {
     start: u32,
     count: u32,
     spacing_m: f32,
+    /// The cell's corner in the camera frame ([`View::in_cell`]).
+    corner: Vec3,
 }
 
 /// A cell in the field of view, before the occlusion test.
@@ -229,8 +234,17 @@ struct View {
     skew: f32,
     u0: f32,
     v0: f32,
+    /// From the cloud's frame to the camera's (cells' centres).
     rotation: Mat3,
     translation: Vec3,
+    /// The same in `f64` (cells' corners).
+    rotation_f64: DMat3,
+    translation_f64: DVec3,
+    /// The projection's transform, from a point's steps to the camera frame: the
+    /// rotation times the cloud's step ([`PointCloud::step_m`]), and the corner of the
+    /// cell being drawn in the camera frame ([`View::in_cell`]).
+    point_rotation: Mat3,
+    point_translation: Vec3,
     alpha: f32,
     xi: f32,
     /// The first column and row of the [`Region`] (splats' pixels are counted from it).
@@ -251,13 +265,16 @@ struct View {
 
 impl View {
     /// The constants of a rendering with `camera` and `options` into `region` from
-    /// the pose `rotation`, `translation` (camera from the cloud's frame).
+    /// the pose `rotation`, `translation` (camera from the cloud's frame), of a cloud
+    /// whose positions are steps of `step_m` (the projection's transform is then the
+    /// one of a cell whose corner is at the cloud's origin).
     fn new(
         camera: &Camera,
         options: &RenderOptions,
         region: Region,
-        rotation: Mat3,
-        translation: Vec3,
+        rotation: DMat3,
+        translation: DVec3,
+        step_m: f64,
     ) -> Self {
         let i = camera.intrinsics();
         Self {
@@ -267,8 +284,12 @@ impl View {
             skew: i.skew as f32,
             u0: i.u0 as f32,
             v0: i.v0 as f32,
-            rotation,
-            translation,
+            rotation: rotation.as_mat3(),
+            translation: translation.as_vec3(),
+            rotation_f64: rotation,
+            translation_f64: translation,
+            point_rotation: (rotation * step_m).as_mat3(),
+            point_translation: translation.as_vec3(),
             alpha: i.alpha_u.max(i.alpha_v) as f32,
             xi: i.xi as f32,
             origin: [region.u0 as i32, region.v0 as i32],
@@ -279,6 +300,22 @@ impl View {
             affine_norm: affine_norm(i.alpha_u, i.alpha_v, i.skew),
             depth_band: options.depth_band,
             band_factor: 1.0 + options.depth_band,
+        }
+    }
+
+    /// A cell's corner (relative to the cloud's origin) in the camera frame, rounded
+    /// once from `f64`.
+    fn corner(&self, corner_m: [f64; 3]) -> Vec3 {
+        (self.rotation_f64 * DVec3::from_array(corner_m) + self.translation_f64).as_vec3()
+    }
+
+    /// The view whose projection draws the points of the cell whose corner is at
+    /// `corner` in the camera frame ([`View::corner`]).
+    #[inline(always)]
+    fn in_cell(&self, corner: Vec3) -> Self {
+        Self {
+            point_translation: corner,
+            ..*self
         }
     }
 }
@@ -515,13 +552,13 @@ impl Renderer {
         }
         // Points are relative to the cloud's origin: fold it into the translation (f64).
         let translation = camera_from_world.transform_point(cloud.origin());
-        let (rotation, _) = camera_from_world.to_f32();
         let view = View::new(
             &self.camera,
             &self.options,
             self.region,
-            rotation,
-            translation.as_vec3(),
+            camera_from_world.rotation_matrix(),
+            translation,
+            cloud.step_m(),
         );
         // Compiled for the widest instruction set found at run time (the occlusion
         // tests' scans and the resolve vectorise with it; the same operations, so the
@@ -746,6 +783,7 @@ impl Renderer {
                     start: cell.start,
                     count,
                     spacing_m,
+                    corner: view.corner(cell.corner_m),
                 },
                 center: c,
                 radius: cell.radius,
@@ -1013,7 +1051,7 @@ fn clip_rect(image_box: [f32; 4], half: f32, view: &View) -> Option<[usize; 4]> 
 /// read (on one thread, the splats that may add a sample are moved to the front; on
 /// several, the others are marked [`NOT_DRAWN`]).
 fn draw_depth(
-    points: &[[f32; 4]],
+    points: &[PackedPoint],
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
@@ -1188,8 +1226,22 @@ fn first_px(x: f32, width: i32) -> i32 {
 /// the model's domain, or entirely outside the image). The reference for
 /// [`project_block`], and the path of cameras with lens distortion.
 #[inline(always)]
-fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> Option<Splat> {
-    let pc = view.rotation * Vec3::new(p[0], p[1], p[2]) + view.translation;
+fn project_point(p: &PackedPoint, footprint: f32, view: &View, camera: &Camera) -> Option<Splat> {
+    let [x, y, z] = p.steps.map(f32::from);
+    project_steps(Vec3::new(x, y, z), p.intensity, footprint, view, camera)
+}
+
+/// [`project_point`] of a point at `steps` (as floats: exact below 2²⁴) from the
+/// corner of the view's cell.
+#[inline(always)]
+fn project_steps(
+    steps: Vec3,
+    intensity: u16,
+    footprint: f32,
+    view: &View,
+    camera: &Camera,
+) -> Option<Splat> {
+    let pc = view.point_rotation * steps + view.point_translation;
     let rho = pc.length();
     let dd = pc.z + view.xi * rho;
     if !(dd > 0.0) || (view.xi > 1.0 && !(view.xi * pc.z + rho > 0.0)) {
@@ -1216,7 +1268,7 @@ fn project_point(p: &[f32; 4], footprint: f32, view: &View, camera: &Camera) -> 
     Some(Splat::new(
         [iu, iv, view.width],
         width,
-        i32::from((p[3] * INTENSITY_SCALE + 0.5) as u16),
+        i32::from(intensity),
         rho,
         band_limit(rho, view),
     ))
@@ -1242,6 +1294,9 @@ const STAGE: usize = 256;
 
 /// How many points ahead of the one being drawn [`Warm`] asks for (in draw order).
 const WARM_AHEAD: usize = 512;
+
+/// Points in a 64-byte cache line.
+const POINTS_PER_LINE: usize = 64 / size_of::<PackedPoint>();
 
 /// Points projected at a time by [`project_block`].
 const BLOCK: usize = 64;
@@ -1295,14 +1350,14 @@ trait Project: Copy {
     /// The splats of `N` points (`N` a multiple of the implementation's width).
     fn lanes<const N: usize>(
         self,
-        points: &[[f32; 4]; N],
+        points: &[PackedPoint; N],
         footprint: f32,
         view: &View,
         out: &mut [Splat; N],
     );
 
     /// The splats of fewer than [`BLOCK`] points (a cell's last ones), as many as `out`.
-    fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]);
+    fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]);
 
     /// Pass 1 of a 3 × 3 splat on plain keys ([`Depths::splat`]); the plain loop
     /// unless the instruction set does it whole rows at a time.
@@ -1354,7 +1409,7 @@ trait Project: Copy {
 #[inline(always)]
 fn by_blocks<const T: usize>(
     projector: impl Project,
-    points: &[[f32; 4]],
+    points: &[PackedPoint],
     footprint: f32,
     view: &View,
     out: &mut [Splat],
@@ -1365,7 +1420,7 @@ fn by_blocks<const T: usize>(
         projector.lanes(chunk, footprint, view, out);
     }
     if !rest.is_empty() {
-        let mut input = [[0f32; 4]; T];
+        let mut input = [PackedPoint::default(); T];
         let mut block = [Splat::default(); T];
         input[..rest.len()].copy_from_slice(rest);
         projector.lanes(&input, footprint, view, &mut block);
@@ -1381,7 +1436,7 @@ impl Project for Baseline {
     #[inline(always)]
     fn lanes<const N: usize>(
         self,
-        points: &[[f32; 4]; N],
+        points: &[PackedPoint; N],
         footprint: f32,
         view: &View,
         out: &mut [Splat; N],
@@ -1390,7 +1445,7 @@ impl Project for Baseline {
     }
 
     #[inline(always)]
-    fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]) {
+    fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<TAIL>(self, points, footprint, view, out);
     }
 }
@@ -1406,7 +1461,7 @@ impl Project for Avx512 {
     #[inline(always)]
     fn lanes<const N: usize>(
         self,
-        points: &[[f32; 4]; N],
+        points: &[PackedPoint; N],
         footprint: f32,
         view: &View,
         out: &mut [Splat; N],
@@ -1416,7 +1471,7 @@ impl Project for Avx512 {
     }
 
     #[inline(always)]
-    fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]) {
+    fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<16>(self, points, footprint, view, out);
     }
 
@@ -1467,7 +1522,7 @@ impl Project for Avx2 {
     #[inline(always)]
     fn lanes<const N: usize>(
         self,
-        points: &[[f32; 4]; N],
+        points: &[PackedPoint; N],
         footprint: f32,
         view: &View,
         out: &mut [Splat; N],
@@ -1477,14 +1532,14 @@ impl Project for Avx2 {
     }
 
     #[inline(always)]
-    fn rest(self, points: &[[f32; 4]], footprint: f32, view: &View, out: &mut [Splat]) {
+    fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<8>(self, points, footprint, view, out);
     }
 }
 
 /// The arguments of [`project_and_depth`] but the projector.
 struct PassOneArgs<'a, D> {
-    points: &'a [[f32; 4]],
+    points: &'a [PackedPoint],
     cells: &'a [DrawCell],
     view: &'a View,
     camera: &'a Camera,
@@ -1571,7 +1626,7 @@ impl<D: Depths, P: Project> pulp::WithSimd for PassOne<'_, D, P> {
 /// [`project_and_depth`] on the widest instruction set found at run time (looked up
 /// once per call, a batch of cells): AVX-512, else AVX2, else the baseline.
 fn widest_pass_one(
-    points: &[[f32; 4]],
+    points: &[PackedPoint],
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
@@ -1607,7 +1662,7 @@ fn widest_pass_one(
 /// points get the width [`NOT_DRAWN`] (their other fields are then meaningless).
 #[inline(always)]
 fn project_block<const N: usize>(
-    points: &[[f32; 4]; N],
+    points: &[PackedPoint; N],
     footprint: f32,
     view: &View,
     out: &mut [Splat; N],
@@ -1629,15 +1684,15 @@ fn project_block<const N: usize>(
 #[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "sse2"))))]
 #[inline(always)]
 fn project_lanes_portable<const N: usize>(
-    points: &[[f32; 4]; N],
+    points: &[PackedPoint; N],
     footprint: f32,
     view: &View,
     out: &mut Lanes<N>,
 ) {
-    let r = view.rotation;
-    let t = view.translation;
+    let r = view.point_rotation;
+    let t = view.point_translation;
     for k in 0..N {
-        let [x, y, z, grey] = points[k];
+        let [x, y, z] = points[k].steps.map(f32::from);
         // `Mat3 * Vec3 + Vec3` as glam computes it.
         let pcx = r.x_axis.x * x + r.y_axis.x * y + r.z_axis.x * z + t.x;
         let pcy = r.x_axis.y * x + r.y_axis.y * y + r.z_axis.y * z + t.y;
@@ -1664,7 +1719,7 @@ fn project_lanes_portable<const N: usize>(
         };
         out.range[k] = rho;
         out.limit[k] = band_limit(rho, view);
-        out.intensity[k] = floor_small(limit(grey * INTENSITY_SCALE + 0.5, 0.0, 65535.0));
+        out.intensity[k] = i32::from(points[k].intensity);
     }
 }
 
@@ -1738,7 +1793,7 @@ fn band_limit(range_m: f32, view: &View) -> f32 {
 /// (in draw order, from the front). Returns the number kept.
 #[inline(always)]
 fn project_and_depth(
-    points: &[[f32; 4]],
+    points: &[PackedPoint],
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
@@ -1755,6 +1810,8 @@ fn project_and_depth(
     for cell in cells {
         let start = cell.start as usize;
         let footprint = cell.spacing_m * view.alpha * view.splat_scale;
+        // The projection of this cell's points (steps from its corner).
+        let view = &view.in_cell(cell.corner);
         for cell_points in points[start..start + cell.count as usize].chunks(STAGE) {
             let out = &mut stage[..cell_points.len()];
             if view.undistorted {
@@ -1803,18 +1860,18 @@ fn project_and_depth(
 /// per line on x86-64; elsewhere a load per line, whose values are xor-ed and kept so
 /// that they are not optimised away. Only the time depends on it.
 struct Warm<'a> {
-    points: &'a [[f32; 4]],
+    points: &'a [PackedPoint],
     cells: &'a [DrawCell],
     /// The cell, and the point in it, to ask for next.
     cell: usize,
     point: usize,
-    /// The group of four points (a cache line's worth) asked for last in this cell.
+    /// The group of points (a cache line's worth) asked for last in this cell.
     last_group: usize,
     loaded: u32,
 }
 
 impl<'a> Warm<'a> {
-    fn new(points: &'a [[f32; 4]], cells: &'a [DrawCell]) -> Self {
+    fn new(points: &'a [PackedPoint], cells: &'a [DrawCell]) -> Self {
         Self {
             points,
             cells,
@@ -1837,17 +1894,16 @@ impl<'a> Warm<'a> {
             if take > 0 {
                 let first = cell.start as usize + self.point;
                 let last = first + take - 1;
-                // Every fourth point (16-byte points: one per 64-byte line), each
-                // group of four once within a cell.
-                let mut group = first / 4;
+                // One point per 64-byte line, each line once within a cell.
+                let mut group = first / POINTS_PER_LINE;
                 if self.point > 0 {
                     group = group.max(self.last_group + 1);
                 }
-                while group <= last / 4 {
-                    self.touch((group * 4).max(first));
+                while group <= last / POINTS_PER_LINE {
+                    self.touch((group * POINTS_PER_LINE).max(first));
                     group += 1;
                 }
-                self.last_group = last / 4;
+                self.last_group = last / POINTS_PER_LINE;
                 n -= take;
                 self.point += take;
             }
@@ -1864,7 +1920,7 @@ impl<'a> Warm<'a> {
         safe_arch::prefetch_t0(&self.points[index]);
         #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
         {
-            self.loaded ^= self.points[index][0].to_bits();
+            self.loaded ^= u32::from(self.points[index].steps[0]);
         }
     }
 
@@ -2045,7 +2101,7 @@ mod tests {
     //! The vectorised per-point kernels against their scalar references, and the
     //! occlusion test's rectangle against the splats it must hold.
 
-    use glam::{Mat3, Vec3};
+    use glam::Vec3;
     use proptest::prelude::*;
     use ucm::{Camera, Intrinsics, ValidRegion};
 
@@ -2089,9 +2145,13 @@ mod tests {
     /// cell's last ones), each checked to agree with the baseline projector; returns
     /// the baseline's. The AVX-512 and AVX2 projectors are checked where the processor
     /// has them.
-    fn with_every_projector(points: &[[f32; 4]; BLOCK], footprint: f32, view: &View) -> Vec<Splat> {
+    fn with_every_projector(
+        points: &[PackedPoint; BLOCK],
+        footprint: f32,
+        view: &View,
+    ) -> Vec<Splat> {
         struct Run<'a, P> {
-            points: &'a [[f32; 4]; BLOCK],
+            points: &'a [PackedPoint; BLOCK],
             footprint: f32,
             view: &'a View,
             projector: P,
@@ -2177,7 +2237,7 @@ mod tests {
         let mut positions = Vec::new();
         let mut intensities = Vec::new();
         while positions.len() < 40_000 {
-            let p = glam::DVec3::new(
+            let p = DVec3::new(
                 rng.unit() * 40.0 - 20.0,
                 rng.unit() * 40.0 - 20.0,
                 rng.unit() * 12.0 - 4.0,
@@ -2187,8 +2247,7 @@ mod tests {
                 intensities.push(rng.unit() as f32);
             }
         }
-        PointCloud::from_points(glam::DVec3::ZERO, &positions, &intensities, None, Some(0.2))
-            .unwrap()
+        PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, Some(0.2)).unwrap()
     }
 
     /// A rendering that did not reach its resolve (its buffers left with stale keys
@@ -2410,10 +2469,11 @@ mod tests {
         ) {
             let (camera, options) = test_setup(alpha_u, aspect, skew, xi, splat_scale, max_radius);
             let renderer = Renderer::new(camera.clone(), options).unwrap();
-            let view = View::new(&camera, &options, region, Mat3::IDENTITY, Vec3::ZERO);
+            // Steps of a metre from the cloud's origin: points are where they are.
+            let view = View::new(&camera, &options, region, DMat3::IDENTITY, DVec3::ZERO, 1.0);
             let center = Vec3::from_array(direction).normalize_or(Vec3::Z) * distance_m;
             let candidate = Candidate {
-                cell: DrawCell { start: 0, count: 1, spacing_m },
+                cell: DrawCell { start: 0, count: 1, spacing_m, corner: Vec3::ZERO },
                 center,
                 radius: radius_m,
                 nearest_m: (distance_m - radius_m).max(0.0),
@@ -2432,8 +2492,7 @@ mod tests {
                 );
                 let offset = offset.clamp_length_max(1.0) * radius_m;
                 let p = center + offset;
-                let Some(splat) = project_point(&[p.x, p.y, p.z, 0.5], footprint, &view, &camera)
-                else {
+                let Some(splat) = project_steps(p, 32_768, footprint, &view, &camera) else {
                     continue;
                 };
                 splat.for_each_pixel(&view, |k| {
@@ -2447,14 +2506,15 @@ mod tests {
         }
 
         /// A block of points (of [`BLOCK`], and its first [`TAIL`] as a tail block)
-        /// projects to exactly the splats of the scalar kernel, points
-        /// behind the viewpoint, beyond the model's domain (ξ > 1), off the image, at
-        /// the origin, or with out-of-range intensities included.
+        /// projects to exactly the splats of the scalar kernel: steps of 1 µm to
+        /// 10 cm, cells' corners near the viewpoint, metres and kilometres away, points
+        /// behind the viewpoint, beyond the model's domain (ξ > 1), off the image, or
+        /// at the viewpoint itself included.
         #[test]
         fn project_block_equals_project_point(
             seed in any::<u64>(),
-            axis_angle in prop::array::uniform3(-3.2f32..3.2),
-            translation in prop::array::uniform3(-5.0f32..5.0),
+            axis_angle in prop::array::uniform3(-3.2f64..3.2),
+            translation in prop::array::uniform3(-5.0f64..5.0),
             alpha_u in 20.0f32..400.0,
             aspect in 0.8f32..1.25,
             skew in -3.0f32..3.0,
@@ -2463,34 +2523,40 @@ mod tests {
             splat_scale in 0.5f32..3.0,
             max_radius in 0u32..12,
             region in regions(),
+            step_exponent in -6i32..=-1,
+            corner_scale in prop::sample::select(vec![0.0f64, 0.3, 3.0, 30.0, 3000.0]),
         ) {
             let (camera, options) = test_setup(alpha_u, aspect, skew, xi, splat_scale, max_radius);
+            let axis = DVec3::from_array(axis_angle);
             let view = View::new(
                 &camera,
                 &options,
                 region,
-                Mat3::from_axis_angle(
-                    Vec3::from_array(axis_angle).normalize_or(Vec3::Z),
-                    Vec3::from_array(axis_angle).length(),
-                ),
-                Vec3::from_array(translation),
+                DMat3::from_axis_angle(axis.normalize_or(DVec3::Z), axis.length()),
+                DVec3::from_array(translation),
+                10f64.powi(step_exponent),
             );
-            // Points at every scale: near the viewpoint, metres and kilometres away.
             let mut rng = crate::rng::SplitMix64::new(seed);
-            let mut points = [[0f32; 4]; BLOCK];
+            let corner = [0.0; 3].map(|_: f64| (rng.unit() * 2.0 - 1.0) * corner_scale);
+            let mut points = [PackedPoint::default(); BLOCK];
             for (k, p) in points.iter_mut().enumerate() {
-                let scale = [0.01, 1.0, 30.0, 3000.0][k % 4];
-                for c in &mut p[..3] {
-                    *c = (rng.unit() as f32 * 2.0 - 1.0) * scale;
-                }
-                p[3] = rng.unit() as f32 * 1.2 - 0.1;
+                // Near the corner, and across the whole cell.
+                let range = [16, 1024, 65_536][k % 3];
+                p.steps = [0; 3].map(|_: u16| rng.below(range) as u16);
+                p.intensity = rng.below(65_536) as u16;
             }
-            points[0] = [-translation[0], -translation[1], -translation[2], f32::NAN];
+            // Without a corner scale, the cell's corner at the viewpoint and the first
+            // point on it.
+            let at_viewpoint = corner_scale == 0.0;
+            if at_viewpoint {
+                points[0].steps = [0; 3];
+            }
+            let view = view.in_cell(if at_viewpoint { Vec3::ZERO } else { view.corner(corner) });
             let footprint = spacing_m * view.alpha * splat_scale;
             let mut block = [Splat::default(); BLOCK];
             project_block(&points, footprint, &view, &mut block);
             let mut tail = [Splat::default(); TAIL];
-            let first: &[[f32; 4]; TAIL] = points[..TAIL].try_into().unwrap();
+            let first: &[PackedPoint; TAIL] = points[..TAIL].try_into().unwrap();
             project_block(first, footprint, &view, &mut tail);
             for (t, b) in tail.iter().zip(&block) {
                 prop_assert_eq!(t, b);

@@ -70,7 +70,7 @@ fn every_shared_cloud_reads_with_its_header_counts_and_colour_range() {
             let max = colors.iter().flatten().copied().max().unwrap();
             assert!(max > 128, "{name}: max colour {max}");
         }
-        let max_i = cloud.points().iter().map(|p| p[3]).fold(0.0f32, f32::max);
+        let max_i = cloud.decoded().map(|(_, i)| i).fold(0.0f32, f32::max);
         assert!(max_i > 0.3 && max_i <= 1.0, "{name}: {max_i}");
         seen += 1;
     }

@@ -1,5 +1,6 @@
 //! Integration tests of `splat`, one binary (modules below) for fast linking.
 
+mod cloud;
 mod common;
 mod las;
 mod render;

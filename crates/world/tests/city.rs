@@ -127,7 +127,7 @@ fn image_textures_modulate_the_city() {
         .points()
         .iter()
         .zip(textured.cloud.points())
-        .filter(|(a, b)| a[3] != b[3])
+        .filter(|(a, b)| a.intensity != b.intensity)
         .count();
     assert!(differ > plain.cloud.len() / 4, "{differ}");
 }
@@ -151,11 +151,10 @@ fn city_ablation_switches_remove_what_they_say() {
     assert!(bare.cloud.len() < full.cloud.len());
     // Clutter is drawn last: the rest of the city is the same point for point.
     let kept = |city: &City| {
-        let mut points: Vec<[u32; 3]> = city
+        let mut points: Vec<[u64; 3]> = city
             .cloud
-            .points()
-            .iter()
-            .map(|p| [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()])
+            .decoded()
+            .map(|(p, _)| p.to_array().map(f64::to_bits))
             .collect();
         points.sort_unstable();
         points

@@ -2,17 +2,17 @@
 //! has it but not AVX-512 (found at run time through [`pulp`], whose wrappers make the
 //! intrinsics safe to call once the instruction set is known to be there): the SSE2
 //! kernel on both 128-bit halves of each register at once, the same IEEE operations in
-//! the same order, hence bit for bit the same splats (tested). Eight points are loaded
-//! as four registers and transposed within each half, which puts points 0, 2, 4, 6 in
-//! the lower half and 1, 3, 5, 7 in the upper one; the same transposition of the
-//! splats' words puts them back in order.
+//! the same order, hence bit for bit the same splats (tested). Eight points (8 bytes
+//! each) are loaded as two registers and their words taken apart so that points 0, 2,
+//! 4, 6 are in the lower half and 1, 3, 5, 7 in the upper one; a transposition of the
+//! splats' words within each half puts them back in order.
 
 use core::arch::x86_64::{__m256, __m256i};
 
 use pulp::x86::V3;
 
-use super::lanes::{Constants, Vectors, splat_words};
-use super::{Splat, View};
+use super::lanes::{Constants, Vectors, splat_words, unpack};
+use super::{PackedPoint, Splat, View};
 
 /// `_CMP_GT_OQ` and `_CMP_LT_OQ`: ordered comparisons, false where either is a NaN
 /// (as SSE's `cmpgtps` / `cmpltps`).
@@ -109,6 +109,10 @@ impl Vectors for Ops {
         self.0.avx2._mm256_slli_epi32::<16>(a)
     }
     #[inline(always)]
+    fn shr16(self, a: __m256i) -> __m256i {
+        self.0.avx2._mm256_srli_epi32::<16>(a)
+    }
+    #[inline(always)]
     fn mul_u16(self, a: __m256i, b: __m256i) -> __m256i {
         self.0.avx2._mm256_mullo_epi32(a, b)
     }
@@ -159,9 +163,21 @@ impl Ops {
         ]
     }
 
+    /// Eight points of two 32-bit words each (points 0–3 in `a`, 4–7 in `b`): their
+    /// first words, then their second words, each register in the lanes' order of
+    /// [`Ops::transpose_halves`] (points 0, 2, 4, 6 | 1, 3, 5, 7).
     #[inline(always)]
-    fn floats(self, a: __m256i) -> __m256 {
-        self.0.avx._mm256_castsi256_ps(a)
+    fn words_of_points(self, a: __m256i, b: __m256i) -> [__m256i; 2] {
+        let (avx, avx2) = (self.0.avx, self.0.avx2);
+        let (a, b) = (avx._mm256_castsi256_ps(a), avx._mm256_castsi256_ps(b));
+        // Within each half: points 0, 1, 4, 5 | 2, 3, 6, 7.
+        let first = avx._mm256_castps_si256(avx._mm256_shuffle_ps::<0b10_00_10_00>(a, b));
+        let second = avx._mm256_castps_si256(avx._mm256_shuffle_ps::<0b11_01_11_01>(a, b));
+        let order: __m256i = pulp::cast([0i32, 4, 2, 6, 1, 5, 3, 7]);
+        [
+            avx2._mm256_permutevar8x32_epi32(first, order),
+            avx2._mm256_permutevar8x32_epi32(second, order),
+        ]
     }
 }
 
@@ -170,7 +186,7 @@ impl Ops {
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V3,
-    points: &[[f32; 4]],
+    points: &[PackedPoint],
     footprint: f32,
     view: &View,
     out: &mut [Splat],
@@ -180,14 +196,14 @@ pub(super) fn project_splats(
     let (points, _) = points.as_chunks::<8>();
     let (out, _) = out.as_chunks_mut::<8>();
     for (points, out) in points.iter().zip(out) {
-        // Eight points [x, y, z, grey], two per register, transposed within each
-        // half: x, y, z and grey of points 0, 2, 4, 6 | 1, 3, 5, 7.
-        let registers: [__m256i; 4] = pulp::cast(*points);
-        let [x, y, z, grey] = o.transpose_halves(registers);
-        let (x, y, z, grey) = (o.floats(x), o.floats(y), o.floats(z), o.floats(grey));
+        // Eight points of 8 bytes, their words taken apart: points 0, 2, 4, 6 |
+        // 1, 3, 5, 7.
+        let [a, b]: [__m256i; 2] = pulp::cast(*points);
+        let [xy, zi] = o.words_of_points(a, b);
+        let (steps, intensity) = unpack(o, &constants, xy, zi);
         // One register per word of the splats, transposed back to four words per
         // point: points 0 | 1, 2 | 3, 4 | 5, 6 | 7.
-        let words = splat_words(o, &constants, [x, y, z, grey]);
+        let words = splat_words(o, &constants, steps, intensity);
         let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves(words));
         for (out, word) in out.iter_mut().zip(&words) {
             *out = Splat(*word);

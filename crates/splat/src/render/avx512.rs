@@ -4,16 +4,15 @@
 //! IEEE operations in the same order as [`super::project_point`] and the SSE2 kernel
 //! (no fused multiply-add; `max` returns its second operand where the first is a NaN,
 //! as `maxps` does), hence bit for bit the same splats (tested against both). Sixteen
-//! points are loaded as four vectors and transposed with eight two-source permutes; the
-//! splats' words are transposed back with eight more (the SSE2 kernel needs 32 + 32
-//! shuffles for as many points).
+//! points (8 bytes each) are loaded as two vectors and taken apart with two two-source
+//! permutes; the splats' words are transposed back with eight more.
 
 use core::arch::x86_64::{__m512, __m512i, __mmask16};
 
 use pulp::x86::V4;
 
-use super::lanes::{Constants, Vectors, splat_words};
-use super::{Splat, View};
+use super::lanes::{Constants, Vectors, splat_words, unpack};
+use super::{PackedPoint, Splat, View};
 
 /// `_CMP_GT_OQ` and `_CMP_LT_OQ`: ordered comparisons, false where either is a NaN
 /// (as SSE's `cmpgtps` / `cmpltps`).
@@ -22,10 +21,8 @@ const LT: i32 = 17;
 
 /// Two-source permute indices: lane `k` of the result takes lane `idx[k]` of `a`
 /// (below 16) or `idx[k] − 16` of `b`.
-const X_Y: [i32; 16] = [0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29];
-const Z_G: [i32; 16] = [2, 6, 10, 14, 18, 22, 26, 30, 3, 7, 11, 15, 19, 23, 27, 31];
-const LOW_EIGHTS: [i32; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23];
-const HIGH_EIGHTS: [i32; 16] = [8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31];
+const EVENS: [i32; 16] = [0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30];
+const ODDS: [i32; 16] = [1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31];
 const PAIRS_LOW: [i32; 16] = [0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23];
 const PAIRS_HIGH: [i32; 16] = [8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31];
 const QUADS_LOW: [i32; 16] = [0, 1, 16, 17, 2, 3, 18, 19, 4, 5, 20, 21, 6, 7, 22, 23];
@@ -121,6 +118,10 @@ impl Vectors for Ops {
         self.0.avx512f._mm512_slli_epi32::<16>(a)
     }
     #[inline(always)]
+    fn shr16(self, a: __m512i) -> __m512i {
+        self.0.avx512f._mm512_srli_epi32::<16>(a)
+    }
+    #[inline(always)]
     fn mul_u16(self, a: __m512i, b: __m512i) -> __m512i {
         self.0.avx512f._mm512_mullo_epi32(a, b)
     }
@@ -150,11 +151,6 @@ impl Vectors for Ops {
 
 impl Ops {
     #[inline(always)]
-    fn permute(self, a: __m512, idx: [i32; 16], b: __m512) -> __m512 {
-        let idx = pulp::cast(idx);
-        self.0.avx512f._mm512_permutex2var_ps(a, idx, b)
-    }
-    #[inline(always)]
     fn permute_i(self, a: __m512i, idx: [i32; 16], b: __m512i) -> __m512i {
         let idx = pulp::cast(idx);
         self.0.avx512f._mm512_permutex2var_epi32(a, idx, b)
@@ -166,7 +162,7 @@ impl Ops {
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V4,
-    points: &[[f32; 4]],
+    points: &[PackedPoint],
     footprint: f32,
     view: &View,
     out: &mut [Splat],
@@ -176,16 +172,13 @@ pub(super) fn project_splats(
     let (points, _) = points.as_chunks::<16>();
     let (out, _) = out.as_chunks_mut::<16>();
     for (points, out) in points.iter().zip(out) {
-        // Sixteen points [x, y, z, grey] transposed into x, y, z and grey.
-        let [a, b, c, d]: [__m512; 4] = pulp::cast(*points);
-        let (ab_xy, ab_zg) = (o.permute(a, X_Y, b), o.permute(a, Z_G, b));
-        let (cd_xy, cd_zg) = (o.permute(c, X_Y, d), o.permute(c, Z_G, d));
-        let x = o.permute(ab_xy, LOW_EIGHTS, cd_xy);
-        let y = o.permute(ab_xy, HIGH_EIGHTS, cd_xy);
-        let z = o.permute(ab_zg, LOW_EIGHTS, cd_zg);
-        let grey = o.permute(ab_zg, HIGH_EIGHTS, cd_zg);
+        // Sixteen points of two 32-bit words each, their first and second words
+        // gathered by two two-source permutes.
+        let [a, b]: [__m512i; 2] = pulp::cast(*points);
+        let (xy, zi) = (o.permute_i(a, EVENS, b), o.permute_i(a, ODDS, b));
+        let (steps, intensity) = unpack(o, &constants, xy, zi);
         // One register per word of the splats, transposed to four words per point.
-        let [w0, w1, w2, w3] = splat_words(o, &constants, [x, y, z, grey]);
+        let [w0, w1, w2, w3] = splat_words(o, &constants, steps, intensity);
         let (w01_lo, w01_hi) = (
             o.permute_i(w0, PAIRS_LOW, w1),
             o.permute_i(w0, PAIRS_HIGH, w1),

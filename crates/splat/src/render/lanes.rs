@@ -3,7 +3,7 @@
 //! four (SSE2), eight (AVX2) or sixteen (AVX-512) points at a time. Each kernel
 //! implements [`Vectors`] for its registers and does its own loads and transposes.
 
-use super::{INTENSITY_SCALE, NOT_DRAWN, View};
+use super::{NOT_DRAWN, View};
 
 /// The operations the projection needs on one register width: `F` holds floats, `I`
 /// 32-bit integers, `M` a lane mask (a register of all-ones lanes on SSE2 and AVX2, a
@@ -38,6 +38,8 @@ pub(super) trait Vectors: Copy {
     fn and_i(self, a: Self::I, b: Self::I) -> Self::I;
     fn or_i(self, a: Self::I, b: Self::I) -> Self::I;
     fn shl16(self, a: Self::I) -> Self::I;
+    /// Logical shift right by 16 bits.
+    fn shr16(self, a: Self::I) -> Self::I;
     /// `a · b` in the lanes where `0 ≤ a, b < 2^16` (anything elsewhere).
     fn mul_u16(self, a: Self::I, b: Self::I) -> Self::I;
     /// The float's bits.
@@ -120,8 +122,8 @@ pub(super) struct Constants<V: Vectors> {
 impl<V: Vectors> Constants<V> {
     #[inline(always)]
     pub(super) fn new(o: V, view: &View, footprint: f32) -> Self {
-        let r = view.rotation;
-        let t = view.translation;
+        let r = view.point_rotation;
+        let t = view.point_translation;
         Self {
             rotation: [
                 [
@@ -165,15 +167,32 @@ impl<V: Vectors> Constants<V> {
     }
 }
 
-/// The four words of the splats of one register of points (given as their `x`, `y`,
-/// `z` and grey level), one register per word: the pixel's index in the region for a
+/// A register of packed points ([`crate::PackedPoint`]) as two registers of 32-bit
+/// words, `xy` (`x | y << 16`, the points' first words) and `zi` (`z | intensity <<
+/// 16`), taken apart: their steps as floats (exact) and their intensities.
+#[inline(always)]
+pub(super) fn unpack<V: Vectors>(o: V, c: &Constants<V>, xy: V::I, zi: V::I) -> ([V::F; 3], V::I) {
+    (
+        [
+            o.to_f32(o.and_i(xy, c.low_half)),
+            o.to_f32(o.shr16(xy)),
+            o.to_f32(o.and_i(zi, c.low_half)),
+        ],
+        o.shr16(zi),
+    )
+}
+
+/// The four words of the splats of one register of points (given as their steps
+/// `x`, `y`, `z` from the corner of the view's cell, and their intensities), one
+/// register per word: the pixel's index in the region for a
 /// single-pixel splat, else `iu | iv << 16`,
 /// `width | intensity << 16`, the range's bits and its band limit's bits.
 #[inline(always)]
 pub(super) fn splat_words<V: Vectors>(
     o: V,
     c: &Constants<V>,
-    [x, y, z, grey]: [V::F; 4],
+    [x, y, z]: [V::F; 3],
+    intensity: V::I,
 ) -> [V::I; 4] {
     let [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]] = c.rotation;
     let [tx, ty, tz] = c.translation;
@@ -229,15 +248,6 @@ pub(super) fn splat_words<V: Vectors>(
         o.gt_i(c.one_i, half),
         o.add_i(o.mul_u16(pv, c.width), pu),
         o.or_i(o.and_i(pu, c.low_half), o.shl16(pv)),
-    );
-    let intensity = floor_small(
-        o,
-        limit(
-            o,
-            o.add(o.mul(grey, o.splat(INTENSITY_SCALE)), o.splat(0.5)),
-            0.0,
-            65535.0,
-        ),
     );
     [
         at,

@@ -7,8 +7,8 @@
 
 use safe_arch::*;
 
-use super::lanes::{Constants, Vectors, splat_words};
-use super::{Splat, View};
+use super::lanes::{Constants, Vectors, splat_words, unpack};
+use super::{PackedPoint, Splat, View};
 
 /// The kernel's registers (a lane mask is a register of all-ones lanes).
 #[derive(Clone, Copy)]
@@ -102,6 +102,10 @@ impl Vectors for Ops {
         shl_imm_u32_m128i::<16>(a)
     }
     #[inline(always)]
+    fn shr16(self, a: m128i) -> m128i {
+        shr_imm_u32_m128i::<16>(a)
+    }
+    #[inline(always)]
     fn mul_u16(self, a: m128i, b: m128i) -> m128i {
         // SSE2 has no 32-bit product: with both factors in the low halves (the high
         // halves zero), the low and high halves of their 16-bit product.
@@ -144,7 +148,7 @@ fn splat_words_of(v: m128i) -> Splat {
 /// of four).
 #[inline(always)]
 pub(super) fn project_splats<const N: usize>(
-    points: &[[f32; 4]; N],
+    points: &[PackedPoint; N],
     footprint: f32,
     view: &View,
     out: &mut [Splat; N],
@@ -152,19 +156,22 @@ pub(super) fn project_splats<const N: usize>(
     const { assert!(N.is_multiple_of(4)) };
     let constants = Constants::new(Ops, view, footprint);
     for base in (0..N).step_by(4) {
-        // Four points [x, y, z, grey] transposed into x, y, z and grey of four points.
-        let a = m128::from_array(points[base]);
-        let b = m128::from_array(points[base + 1]);
-        let c = m128::from_array(points[base + 2]);
-        let d = m128::from_array(points[base + 3]);
-        let (ab_lo, cd_lo) = (unpack_low_m128(a, b), unpack_low_m128(c, d));
-        let (ab_hi, cd_hi) = (unpack_high_m128(a, b), unpack_high_m128(c, d));
-        let x = move_low_high_m128(ab_lo, cd_lo);
-        let y = move_high_low_m128(cd_lo, ab_lo);
-        let z = move_low_high_m128(ab_hi, cd_hi);
-        let grey = move_high_low_m128(cd_hi, ab_hi);
+        // Four points of two 32-bit words each: their first words, their second.
+        let [a, b]: [[i32; 4]; 2] = bytemuck::cast([
+            points[base],
+            points[base + 1],
+            points[base + 2],
+            points[base + 3],
+        ]);
+        let (a, b) = (
+            cast_to_m128_from_m128i(a.into()),
+            cast_to_m128_from_m128i(b.into()),
+        );
+        let xy = cast_to_m128i_from_m128(shuffle_abi_f32_all_m128::<0b10_00_10_00>(a, b));
+        let zi = cast_to_m128i_from_m128(shuffle_abi_f32_all_m128::<0b11_01_11_01>(a, b));
+        let (steps, intensity) = unpack(Ops, &constants, xy, zi);
         // The splats' words, one vector per word, transposed to one vector per point.
-        let words = splat_words(Ops, &constants, [x, y, z, grey]);
+        let words = splat_words(Ops, &constants, steps, intensity);
         let (w01_lo, w23_lo) = (
             unpack_low_i32_m128i(words[0], words[1]),
             unpack_low_i32_m128i(words[2], words[3]),
