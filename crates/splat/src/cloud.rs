@@ -1,7 +1,6 @@
 //! [`PointCloud`]: points laid out for rendering speed.
 //!
-//! * Points are grouped into cubic cells (visibility culling and level of detail), and
-//!   each point is stored in 8 bytes ([`PackedPoint`]): its position as three 16-bit
+//! * Each point is stored in 8 bytes ([`PackedPoint`]): its position as three 16-bit
 //!   steps from its cell's corner (a step is [`PointCloud::step_m`], the cell's edge
 //!   over 65 535: 31 µm in the default 2 m cells), its intensity in 16-bit fixed point.
 //!   The corners are `f64` relative to an `f64` origin, so that a georeferenced cloud

@@ -55,9 +55,9 @@
 //! at run time, sixteen or eight points per instruction, through `pulp`), else in
 //! explicit SSE2 on x86-64 (through `safe_arch`, four points per instruction), each
 //! splat written whole as four 32-bit words (a single-pixel splat's first word is its
-//! pixel's index, so that neither pass unpacks a column and a row); elsewhere with branch-free arithmetic that
-//! the compiler vectorises; then it scatters their splats. Every kernel gives the same
-//! bits.
+//! pixel's index, so that neither pass unpacks a column and a row); elsewhere with
+//! branch-free arithmetic that the compiler vectorises; then it scatters their splats.
+//! Every kernel gives the same bits.
 //! The points 512 ahead in the draw list are prefetched, a few cache lines per block
 //! (cells are drawn front to back, not in memory order). Single-pixel splats (most of
 //! them) skip the square loops, and the single-threaded passes take minima and add
