@@ -412,7 +412,8 @@ const INTENSITY_SCALE: f32 = 65535.0;
 const RANGE_SCALE: f32 = 4096.0;
 
 impl Renderer {
-    /// A renderer for `camera`. Fails on invalid options.
+    /// A renderer for `camera`. Fails on invalid options, or on a camera whose valid
+    /// pixels reach too far ([`SplatError::RegionTooLarge`]).
     pub fn new(camera: Camera, options: RenderOptions) -> Result<Self, SplatError> {
         let region = Region::of(&camera);
         Self::with_region(camera, options, region)

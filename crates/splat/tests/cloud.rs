@@ -9,7 +9,9 @@ use splat::PointCloud;
 /// 20 000 points on a 1 cm lattice (offset by 3 mm, so that every decoded point
 /// rounds back to its lattice node) in a 30 × 30 × 8 m box far from the origin of
 /// the world, with random intensities: each decodes within half a step (in every cell
-/// size) of its position, and its intensity within half of 1/65 535.
+/// size) of its position, and its intensity within half of 1/65 535; every cell's
+/// sphere holds its points, the cloud's origin near them or 580 km away (where the
+/// centres' `f32` rounding exceeds a millimetre). Cells under a millimetre are refused.
 #[test]
 fn points_decode_to_half_a_step() {
     let origin = DVec3::new(651_234.5, 6_862_345.25, 40.0);
@@ -21,9 +23,10 @@ fn points_decode_to_half_a_step() {
         given.insert(node, (origin + p, rng.unit() as f32));
     }
     let (positions, intensities): (Vec<DVec3>, Vec<f32>) = given.values().copied().unzip();
-    for cell_size_m in [0.5f32, 2.0, 10.0] {
+    let far = origin - DVec3::new(5e5, 3e5, 0.0);
+    for (cloud_origin, cell_size_m) in [(origin, 0.5), (origin, 2.0), (origin, 10.0), (far, 2.0)] {
         let cloud = PointCloud::build(
-            origin,
+            cloud_origin,
             &positions,
             &intensities,
             None,
@@ -35,13 +38,16 @@ fn points_decode_to_half_a_step() {
         let half_step = cloud.step_m() * 0.5 + 1e-9;
         assert!((cloud.step_m() - f64::from(cell_size_m) / 65_535.0).abs() < 1e-15);
         for (i, (p, intensity)) in cloud.decoded().enumerate() {
-            let node = ((p - 0.003) / 0.01).round().to_array().map(|c| c as i64);
+            let node = ((cloud_origin + p - origin - 0.003) / 0.01)
+                .round()
+                .to_array()
+                .map(|c| c as i64);
             let (want, want_intensity) = given[&node];
-            let error = (origin + p - want).abs().max_element();
+            let error = (cloud_origin + p - want).abs().max_element();
             assert!(error <= half_step, "point {i}: {error:e} m off");
             assert!((intensity - want_intensity).abs() <= 0.5 / 65_535.0 + 1e-7);
             assert_eq!(cloud.point(i), Some((p, intensity)));
-            assert_eq!(cloud.world_position(i), origin + p);
+            assert_eq!(cloud.world_position(i), cloud_origin + p);
         }
         assert_eq!(cloud.point(cloud.len()), None);
         // Every cell's bounding sphere holds its decoded points.
@@ -53,4 +59,11 @@ fn points_decode_to_half_a_step() {
             }
         }
     }
+    assert!(matches!(
+        PointCloud::build(origin, &positions, &intensities, None, Some(0.01), 1e-4),
+        Err(splat::SplatError::Parameter {
+            name: "cell_size_m",
+            ..
+        })
+    ));
 }
