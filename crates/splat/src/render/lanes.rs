@@ -184,9 +184,8 @@ pub(super) fn unpack<V: Vectors>(o: V, c: &Constants<V>, xy: V::I, zi: V::I) -> 
 
 /// The four words of the splats of one register of points (given as their steps
 /// `x`, `y`, `z` from the corner of the view's cell, and their intensities), one
-/// register per word: the pixel's index in the region for a
-/// single-pixel splat, else `iu | iv << 16`,
-/// `width | intensity << 16`, the range's bits and its band limit's bits.
+/// register per word: the pixel's index in the region for a single-pixel splat, else
+/// `iu | iv << 16`; `width | intensity << 16`; the range's bits; its band limit's bits.
 #[inline(always)]
 pub(super) fn splat_words<V: Vectors>(
     o: V,

@@ -3,7 +3,8 @@
 //! same IEEE operations in the same order as [`super::project_point`], hence bit for
 //! bit the same splats (tested against it). The compiler's own vectorisation of the
 //! portable kernel gathered each coordinate of each point with its own load; here four
-//! points are loaded whole and transposed with eight shuffles.
+//! points (8 bytes each) are loaded as two registers and their words taken apart with
+//! two shuffles.
 
 use safe_arch::*;
 
