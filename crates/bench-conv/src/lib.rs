@@ -113,6 +113,52 @@ pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Res
     spec.world_from_camera()
 }
 
+/// Parse a list of frame numbers: comma-separated numbers and inclusive ranges
+/// `first-last`, a range optionally stepped (`0-999/10`: 0, 10, …, 990), in the order
+/// given, without repeats. At most [`rgbd::MAX_FRAMES`] frames.
+pub fn parse_frames(text: &str) -> anyhow::Result<Vec<u64>> {
+    let mut frames = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (range, step) = match item.split_once('/') {
+            Some((range, step)) => (
+                range,
+                step.trim()
+                    .parse::<u64>()
+                    .ok()
+                    .filter(|&s| s > 0)
+                    .with_context(|| format!("`{item}`: the step must be an integer >= 1"))?,
+            ),
+            None => (item, 1),
+        };
+        let number = |s: &str| {
+            s.trim()
+                .parse::<u64>()
+                .with_context(|| format!("`{item}`: `{s}` is not a frame number"))
+        };
+        let (first, last) = match range.split_once('-') {
+            Some((a, b)) => (number(a)?, number(b)?),
+            None => (number(range)?, number(range)?),
+        };
+        if last < first {
+            bail!("`{item}`: the range's last frame comes before its first");
+        }
+        let count = (last - first) / step + 1;
+        if frames.len() as u64 + count > rgbd::MAX_FRAMES {
+            bail!("more than {} frames", rgbd::MAX_FRAMES);
+        }
+        for k in (first..=last).step_by(step as usize) {
+            if seen.insert(k) {
+                frames.push(k);
+            }
+        }
+    }
+    if frames.is_empty() {
+        bail!("no frame in `{text}`");
+    }
+    Ok(frames)
+}
+
 /// Register the plots' font (Hack, embedded by `epaint_default_fonts`) once, so that
 /// plotting needs no system font.
 pub fn register_font() {

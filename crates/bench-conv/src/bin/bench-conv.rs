@@ -106,7 +106,38 @@ enum Command {
         #[arg(long)]
         textures: Option<PathBuf>,
     },
-    /// Render a cloud at a pose with a camera, to a PNG.
+    /// Fuse RGB-D frames (colour, 16-bit depth, poses) into a coloured LAS/LAZ cloud
+    /// (dataset format: crates/rgbd/src/dataset.rs).
+    Fuse {
+        /// The dataset's description (TOML).
+        #[arg(long)]
+        dataset: PathBuf,
+        /// The folder of its frames.
+        #[arg(long)]
+        data: PathBuf,
+        /// Frames to fuse: numbers and ranges, `0-999/10,1200` (a range's step after /).
+        #[arg(long)]
+        frames: String,
+        /// Frames left out of --frames (same syntax).
+        #[arg(long)]
+        exclude: Option<String>,
+        /// Voxel edge, metres: one point per voxel.
+        #[arg(long, default_value_t = rgbd::FuseOptions::default().voxel_size_m)]
+        voxel_m: f64,
+        /// Keep voxels seen by at least this many frames.
+        #[arg(long, default_value_t = rgbd::FuseOptions::default().min_frames)]
+        min_frames: u32,
+        /// Drop depth pixels whose neighbours' depth differs by more than this fraction
+        /// (0: keep them all).
+        #[arg(long, default_value_t = 0.03)]
+        flying_jump: f32,
+        /// Nearest and farthest depth kept, metres.
+        #[arg(long, default_value = "0.2,6")]
+        depth_range_m: String,
+        /// Output cloud (.las or .laz).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Check a protocol's results folder against the protocol file.
     Check {
         /// The protocol file.
@@ -416,6 +447,54 @@ fn main() -> anyhow::Result<()> {
                 city.generation_time_s
             );
             splat::write_las(&city.cloud, &out)?;
+            println!("wrote {}", out.display());
+        }
+        Command::Fuse {
+            dataset,
+            data,
+            frames,
+            exclude,
+            voxel_m,
+            min_frames,
+            flying_jump,
+            depth_range_m,
+            out,
+        } => {
+            splat::check_las_path(&out)?;
+            let dataset = rgbd::RgbdDataset::load(&dataset, &data)?;
+            let mut list = bench_conv::parse_frames(&frames).context("--frames")?;
+            if let Some(exclude) = exclude {
+                let exclude = bench_conv::parse_frames(&exclude).context("--exclude")?;
+                list.retain(|k| !exclude.contains(k));
+            }
+            anyhow::ensure!(!list.is_empty(), "no frame to fuse");
+            let [near, far] = bench_conv::parse_numbers::<2>(&depth_range_m)?;
+            let options = rgbd::FuseOptions {
+                voxel_size_m: voxel_m,
+                min_frames,
+                flying_pixel_jump: (flying_jump > 0.0).then_some(flying_jump),
+                depth_range_m: [near as f32, far as f32],
+                ..rgbd::FuseOptions::default()
+            };
+            options.validate()?;
+            let started = Instant::now();
+            let progress = bench_conv::progress::Progress::new(list.len() as u64, "frames");
+            let (cloud, report) = dataset.fuse(&list, options, |_, _| progress.inc(1, ""))?;
+            progress.finish();
+            let p = report.pixels;
+            println!(
+                "{} frames in {:.1} s: {} depth pixels measured, {} flying, {} outside the colour picture, {} hidden from it; {} fused into {} voxels, {} seen by {min_frames} frames or more",
+                report.frames,
+                started.elapsed().as_secs_f64(),
+                p.measured,
+                p.flying,
+                p.outside_color,
+                p.occluded,
+                p.fused,
+                report.voxels,
+                report.points
+            );
+            splat::write_las(&cloud, &out)?;
             println!("wrote {}", out.display());
         }
         Command::Check {

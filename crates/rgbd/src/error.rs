@@ -1,0 +1,119 @@
+//! The one error type of the crate.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong when reading RGB-D frames and fusing them.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RgbdError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A picture could not be decoded.
+    #[error("{path}: {source}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: Box<image::ImageError>,
+    },
+    /// A picture of another size than its camera's.
+    #[error("{what} {path} is {got_width}x{got_height} but its camera is {width}x{height}")]
+    Size {
+        /// Colour or depth.
+        what: &'static str,
+        /// The file (or `<memory>`).
+        path: PathBuf,
+        /// The picture's width.
+        got_width: u32,
+        /// The picture's height.
+        got_height: u32,
+        /// The camera's width.
+        width: u32,
+        /// The camera's height.
+        height: u32,
+    },
+    /// A depth picture whose samples are not 16-bit (or 8-bit) grey.
+    #[error("depth picture {path} is {kind}, expected 16-bit grey")]
+    DepthFormat {
+        /// The file.
+        path: PathBuf,
+        /// What it holds.
+        kind: String,
+    },
+    /// A buffer of the wrong length.
+    #[error("{what}: {got} values for {expected} pixels")]
+    Length {
+        /// Which buffer.
+        what: &'static str,
+        /// Its length.
+        got: usize,
+        /// The pixel count.
+        expected: usize,
+    },
+    /// A pose file that cannot be read as poses.
+    #[error("pose file {path}, line {line}: {message}")]
+    Pose {
+        /// The file.
+        path: PathBuf,
+        /// Line number (1-based; 0 for the whole file).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A frame number without a pose.
+    #[error("frame {frame} has no pose in {path} ({available})")]
+    MissingPose {
+        /// The frame number.
+        frame: u64,
+        /// The pose file.
+        path: PathBuf,
+        /// Which frames have one.
+        available: String,
+    },
+    /// A dataset description that cannot be used.
+    #[error("dataset {path}: {message}")]
+    Dataset {
+        /// The description file (or `<memory>`).
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A setting out of its range.
+    #[error("{name}: {message}")]
+    Parameter {
+        /// The setting.
+        name: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// The fusion would hold more voxels than allowed.
+    #[error(
+        "the fused cloud would hold more than {limit} voxels (raise max_voxels, or take a coarser voxel or fewer frames)"
+    )]
+    TooManyVoxels {
+        /// The limit.
+        limit: usize,
+    },
+    /// No voxel was seen by enough frames.
+    #[error(
+        "no voxel was seen by {min_frames} frames or more ({voxels} voxels seen by fewer): nothing to write"
+    )]
+    Empty {
+        /// The required number of frames.
+        min_frames: u32,
+        /// Voxels seen by fewer frames.
+        voxels: usize,
+    },
+    /// A camera could not be read or used.
+    #[error(transparent)]
+    Camera(#[from] ucm::UcmError),
+    /// The cloud could not be built.
+    #[error(transparent)]
+    Cloud(#[from] splat::SplatError),
+}

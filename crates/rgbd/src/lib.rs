@@ -1,0 +1,14 @@
+#![doc = include_str!("../README.md")]
+#![deny(missing_docs)]
+
+mod dataset;
+mod error;
+mod fusion;
+mod pictures;
+
+pub use dataset::{
+    FuseReport, MAX_FRAMES, PoseOf, RgbdDataset, frame_path, isometry_from_rows, nearest_rotation,
+};
+pub use error::RgbdError;
+pub use fusion::{FrameStats, FuseOptions, Fusion, Sensor};
+pub use pictures::{ColorImage, DepthImage};
