@@ -22,6 +22,13 @@ pub struct Brightness {
     width: usize,
     height: usize,
     samples: Vec<u32>,
+    /// Whether each pixel of the last picture holds an intensity (false outside the
+    /// region).
+    observed: Vec<bool>,
+    /// Whether every pixel of the region held one in the last picture.
+    all_observed: bool,
+    /// The gradient's plan of the last picture's observed pixels, when not all are.
+    observed_gradient: MaskedGradient,
     image: Vec<f32>,
     inverse_range: Vec<f32>,
     gradient: Vec<[f32; 2]>,
@@ -67,6 +74,9 @@ impl Brightness {
             width,
             height,
             samples,
+            observed: vec![false; n],
+            all_observed: true,
+            observed_gradient: MaskedGradient::default(),
             image: vec![0.0; n],
             inverse_range: vec![0.0; n],
             gradient: vec![[0.0; 2]; n],
@@ -78,18 +88,20 @@ impl Brightness {
         }
     }
 
-    /// Centre and normalise the brightness (zero mean, unit norm over the valid pixels)
-    /// before use, as the paper does for real images (§4). The interaction matrix is
-    /// scaled by the same factor (the dependence of the mean and norm on the pose is
-    /// neglected, as usual).
+    /// Centre and normalise the brightness (zero mean, unit norm over the observed
+    /// pixels of the region) before use, as the paper does for real images (§4). The
+    /// interaction matrix is scaled by the same factor (the dependence of the mean and
+    /// norm on the pose is neglected, as usual).
     pub fn with_normalization(mut self, normalize: bool) -> Self {
         self.normalize = normalize;
         self
     }
 
     /// Compute values and interaction matrix from a rendered frame or a measured image.
-    /// Pixels not observed are ignored (intensity 0); sky pixels, and every pixel of a
-    /// measured image, have `1/ρ = 0`.
+    /// Pixels not observed are ignored: intensity 0 (after normalisation), no gradient
+    /// (the gradient is taken inside the observed pixels, one-sided at their edge, as
+    /// at the region's); sky pixels, and every pixel of a measured image, have
+    /// `1/ρ = 0`.
     pub fn compute(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
         self.compute_pixels(picture)?;
         for (s, &k) in self.samples.iter().enumerate() {
@@ -132,14 +144,22 @@ impl Brightness {
         // The image is zero outside the valid pixels from the start and never written
         // there; the inverse ranges are zeroed between the valid runs.
         let mut end = 0;
+        let mut all_observed = true;
         for &[start, stop] in &self.valid_runs {
             let run = start as usize..stop as usize;
             self.inverse_range[end..run.start].fill(0.0);
             picture.observed_intensity(run.clone(), &mut self.image[run.clone()]);
+            picture.observed(run.clone(), &mut self.observed[run.clone()]);
+            all_observed &= self.observed[run.clone()].iter().all(|&o| o);
             end = run.end;
         }
         self.inverse_range[end..].fill(0.0);
+        self.all_observed = all_observed;
         self.scale = 1.0;
+        if !all_observed {
+            self.partly_observed();
+            return;
+        }
         if self.normalize {
             let m = self.samples.len().max(1) as f64;
             let mean = self
@@ -177,6 +197,67 @@ impl Brightness {
             });
             first += n;
         }
+    }
+
+    /// [`Brightness::pixels`] for a picture that does not hold an intensity at every
+    /// pixel of the region: the normalisation over the observed pixels only, the
+    /// others 0, the gradient inside the observed pixels.
+    #[inline(always)]
+    fn partly_observed(&mut self) {
+        if self.normalize {
+            let observed = || self.samples.iter().filter(|&&k| self.observed[k as usize]);
+            let count = observed().count().max(1) as f64;
+            let mean = observed()
+                .map(|&k| f64::from(self.image[k as usize]))
+                .sum::<f64>()
+                / count;
+            let norm = observed()
+                .map(|&k| (f64::from(self.image[k as usize]) - mean).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
+            for &k in &self.samples {
+                let k = k as usize;
+                self.image[k] = if self.observed[k] {
+                    ((f64::from(self.image[k]) - mean) * scale) as f32
+                } else {
+                    0.0
+                };
+            }
+            self.scale = scale as f32;
+        }
+        self.observed_gradient
+            .rebuild(&self.observed, self.width, self.height);
+        self.observed_gradient
+            .compute(&self.image, &self.observed, &mut self.gradient);
+        for &k in &self.samples {
+            if !self.observed[k as usize] {
+                self.gradient[k as usize] = [0.0; 2];
+            }
+        }
+        let mut first = 0;
+        for &[start, end] in &self.valid_runs {
+            let (run, n) = (start as usize..end as usize, (end - start) as usize);
+            photometric::rows(photometric::Run {
+                u: &self.factors_u[first..first + n],
+                v: &self.factors_v[first..first + n],
+                gradient: &self.gradient[run.clone()],
+                inverse_range: &self.inverse_range[run.clone()],
+                out: &mut self.pixel_interaction[run],
+            });
+            first += n;
+        }
+    }
+
+    /// Whether each pixel held an intensity in the last picture (false outside the
+    /// region), row-major.
+    pub fn observed(&self) -> &[bool] {
+        &self.observed
+    }
+
+    /// Whether every pixel of the region held an intensity in the last picture.
+    pub fn all_observed(&self) -> bool {
+        self.all_observed
     }
 
     /// Row-major pixel indices of the samples (the valid pixels).

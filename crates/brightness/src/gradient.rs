@@ -71,6 +71,13 @@ pub(crate) struct MaskedGradient {
 
 impl MaskedGradient {
     pub(crate) fn new(valid: &[bool], width: usize, height: usize) -> Self {
+        let mut plan = Self::default();
+        plan.rebuild(valid, width, height);
+        plan
+    }
+
+    /// The plan of another region, in place (the buffers kept).
+    pub(crate) fn rebuild(&mut self, valid: &[bool], width: usize, height: usize) {
         let inside = |k: usize| {
             let (i, j) = (k % width, k / width);
             valid[k]
@@ -83,8 +90,9 @@ impl MaskedGradient {
                 && valid[k - width]
                 && valid[k + width]
         };
-        let mut interior: Vec<[u32; 2]> = Vec::new();
-        let mut edge = Vec::new();
+        let (interior, edge) = (&mut self.interior, &mut self.edge);
+        interior.clear();
+        edge.clear();
         for k in 0..width * height {
             if inside(k) {
                 match interior.last_mut() {
@@ -97,12 +105,8 @@ impl MaskedGradient {
                 edge.push(k as u32);
             }
         }
-        Self {
-            width,
-            height,
-            interior,
-            edge,
-        }
+        self.width = width;
+        self.height = height;
     }
 
     /// [`masked_gradient`] at the valid pixels (the same values, bit for bit); `out` is

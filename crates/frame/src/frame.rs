@@ -220,6 +220,14 @@ impl AnyImage for Frame {
     }
 
     #[inline]
+    fn observed(&self, pixels: std::ops::Range<usize>, out: &mut [bool]) {
+        assert_eq!(out.len(), pixels.len(), "one flag per pixel");
+        for (o, &s) in out.iter_mut().zip(&self.status[pixels]) {
+            *o = s != PixelStatus::Masked;
+        }
+    }
+
+    #[inline]
     fn observed_intensity(&self, pixels: std::ops::Range<usize>, out: &mut [f32]) {
         assert_eq!(out.len(), pixels.len(), "one value per pixel");
         let status = &self.status[pixels.clone()];

@@ -289,6 +289,11 @@ impl AnyImage for Image {
     }
 
     #[inline]
+    fn observed(&self, pixels: std::ops::Range<usize>, out: &mut [bool]) {
+        out.copy_from_slice(&self.valid[pixels]);
+    }
+
+    #[inline]
     fn observed_intensity(&self, pixels: std::ops::Range<usize>, out: &mut [f32]) {
         assert_eq!(out.len(), pixels.len(), "one value per pixel");
         let valid = &self.valid[pixels.clone()];

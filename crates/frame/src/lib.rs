@@ -4,10 +4,12 @@
 mod error;
 mod frame;
 mod image;
+mod restricted;
 
 pub use error::FrameError;
 pub use frame::{Frame, PixelStatus};
 pub use image::Image;
+pub use restricted::Restricted;
 
 /// What a feature reads from a picture, measured ([`Image`]) or rendered ([`Frame`]):
 /// its size, its intensities, which pixels hold one, and the inverse range where it is
@@ -35,6 +37,16 @@ pub trait AnyImage {
         let intensity = &self.intensity()[pixels.clone()];
         for ((o, &i), k) in out.iter_mut().zip(intensity).zip(pixels) {
             *o = if self.is_observed(k) { i } else { 0.0 };
+        }
+    }
+
+    /// Whether each pixel of `pixels` (row-major indices) holds an intensity, into
+    /// `out` (one flag per pixel of `pixels`). Panics if `pixels` is outside the
+    /// picture or `out` is not as long.
+    fn observed(&self, pixels: std::ops::Range<usize>, out: &mut [bool]) {
+        assert_eq!(out.len(), pixels.len(), "one flag per pixel");
+        for (o, k) in out.iter_mut().zip(pixels) {
+            *o = self.is_observed(k);
         }
     }
 

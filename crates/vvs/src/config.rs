@@ -77,6 +77,25 @@ pub enum Robust {
     },
 }
 
+/// Which pixels the rendering and the picture are compared on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Support {
+    /// Every pixel of the camera's region where the picture holds an intensity; where
+    /// the cloud has no point the rendering holds the background (sky) intensity
+    /// ([`splat::RenderOptions::background`]). The paper's comparison, and right when
+    /// the cloud is complete and the picture's sky is the renderer's.
+    #[default]
+    Region,
+    /// Beyond the paper: only the pixels where the rendering sees a point *and* the
+    /// picture holds an intensity, recomputed at every iteration; both pictures are
+    /// centred and normalised over them, and are 0 elsewhere, before their features
+    /// are taken (the desired feature is then taken again at every iteration). What
+    /// the cloud does not hold (its holes, what its scans never saw, the sky) is
+    /// unknown, not a grey wall.
+    Common,
+}
+
 /// Every setting of the optimiser.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -129,6 +148,8 @@ pub struct VvsConfig {
     pub lambda_schedule: Vec<f32>,
     /// Centre and normalise the brightness of both images (§4, for real images).
     pub normalize: bool,
+    /// Which pixels are compared.
+    pub support: Support,
     /// PGM sample stride (1: every pixel).
     pub pgm_stride: u32,
     /// From this λ (pixels) up, the PGM's correlations use recursive filters (cost
@@ -178,6 +199,7 @@ impl Default for VvsConfig {
             pyramid_levels: 1,
             lambda_schedule: Vec::new(),
             normalize: false,
+            support: Support::Region,
             pgm_stride: 1,
             pgm_recursive_from_lambda: 3.0,
             pgm_interaction_row_step_lambdas: 0.2,

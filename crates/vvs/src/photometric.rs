@@ -17,7 +17,7 @@
 //! the norm on `c` neglected as for the pose); they are checked against finite
 //! differences in `tests/photometric.rs`.
 
-use frame::{AnyImage, Frame, Image, PixelStatus};
+use frame::{Frame, Image, PixelStatus};
 use ucm::{Camera, ValidRegion};
 
 /// Largest `|c_k|` the estimate may reach (`V_c` stays positive over the region while
@@ -77,23 +77,25 @@ impl RadialVignetting {
 
     /// The derivative with respect to `c_k` (`k` = 0 or 1) of the picture the feature
     /// transforms, for the rendering `frame` (uncorrected): `ρ^{2(k+1)} I` on the
-    /// observed pixels (the others invalid), written into `out`. When the brightness is
-    /// normalised, `normalization` gives the scale `1/‖I' − mean‖` of the corrected
-    /// picture `I'` and the normalised picture `n` itself (row-major, as
+    /// pixels the feature `observed` (the others invalid), written into `out`. When the
+    /// brightness is normalised, `normalization` gives the scale `1/‖I' − mean‖` of the
+    /// corrected picture `I'` and the normalised picture `n` itself (row-major, as
     /// `brightness::Brightness::image`): the derivative of `n` is then exact,
-    /// `s (d − mean d) − n ⟨n, s (d − mean d)⟩` over `samples` (a radial ramp is nearly
-    /// collinear with the picture, so the norm's dependence cannot be neglected here).
+    /// `s (d − mean d) − n ⟨n, s (d − mean d)⟩` over the observed `samples` (a radial
+    /// ramp is nearly collinear with the picture, so the norm's dependence cannot be
+    /// neglected here).
     pub fn derivative(
         &self,
         k: usize,
         frame: &Frame,
         samples: &[u32],
+        observed: &[bool],
         normalization: Option<(f32, &[f32])>,
         out: &mut Image,
     ) {
         debug_assert!(out.width() == self.width && out.height() == self.height);
         for (i, (o, v)) in out.intensity.iter_mut().zip(&mut out.valid).enumerate() {
-            let observed = frame.is_observed(i);
+            let observed = observed[i];
             *v = observed;
             *o = if observed {
                 let r2 = self.rho2[i];
@@ -103,21 +105,20 @@ impl RadialVignetting {
             };
         }
         if let Some((scale, normalized)) = normalization {
-            let m = samples.len().max(1) as f64;
-            let mean = samples
-                .iter()
+            let seen = || samples.iter().filter(|&&s| observed[s as usize]);
+            let m = seen().count().max(1) as f64;
+            let mean = seen()
                 .map(|&s| f64::from(out.intensity[s as usize]))
                 .sum::<f64>()
                 / m;
             let scale = f64::from(scale);
-            let along: f64 = samples
-                .iter()
+            let along: f64 = seen()
                 .map(|&s| {
                     let s = s as usize;
                     f64::from(normalized[s]) * (f64::from(out.intensity[s]) - mean) * scale
                 })
                 .sum();
-            for &s in samples {
+            for &s in seen() {
                 let s = s as usize;
                 let centred = (f64::from(out.intensity[s]) - mean) * scale;
                 out.intensity[s] = (centred - f64::from(normalized[s]) * along) as f32;

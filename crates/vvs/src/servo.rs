@@ -3,7 +3,7 @@
 use std::time::Instant;
 
 use brightness::{Brightness, normal_equations, normal_equations_with_column};
-use frame::{AnyImage, Frame, Image};
+use frame::{AnyImage, Frame, Image, PixelStatus, Restricted};
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
 use splat::{PointCloud, RenderOptions, Renderer};
@@ -13,7 +13,7 @@ use crate::global::{MAX_CANDIDATES, PriorBox, SearchReport};
 use crate::photometric::{MAX_COEFFICIENT, RadialVignetting};
 use crate::solve::solve;
 use crate::{
-    Divergence, IterationRecord, Method, Outcome, Robust, StopReason, VvsConfig, VvsError,
+    Divergence, IterationRecord, Method, Outcome, Robust, StopReason, Support, VvsConfig, VvsError,
 };
 
 /// One stage of a method.
@@ -62,6 +62,11 @@ struct Level {
     corrected: Frame,
     derivative: Image,
     derivative_pgm: Pgm,
+    /// With [`Support::Common`]: the desired picture's features on the pixels compared
+    /// (taken again at every iteration), and those pixels.
+    desired_pgm: Pgm,
+    desired_brightness: Brightness,
+    support: Vec<bool>,
 }
 
 impl Level {
@@ -100,6 +105,19 @@ impl Level {
                     ..PgmOptions::default()
                 },
             )?,
+            desired_pgm: Pgm::new(
+                &camera,
+                PgmOptions {
+                    stride: config.pgm_stride,
+                    normalize: config.normalize,
+                    parallel: config.parallel,
+                    recursive_from_lambda: config.pgm_recursive(),
+                    interaction_row_step_lambdas: config.pgm_interaction_row_step(),
+                    ..PgmOptions::default()
+                },
+            )?,
+            desired_brightness: Brightness::new(&camera).with_normalization(config.normalize),
+            support: vec![false; camera.pixel_count()],
             camera,
         })
     }
@@ -776,14 +794,21 @@ impl<'a> Servo<'a> {
             corrected,
             derivative,
             derivative_pgm,
+            desired_pgm,
+            desired_brightness,
+            support,
         } = &mut self.levels[level];
         let vignetting_on = self.config.vignetting;
-        // The desired feature, fixed for the stage.
+        let common = self.config.support == Support::Common;
+        // The desired feature, fixed for the stage (on the common support: taken again
+        // at every iteration).
         let (mut lambda, optimise_lambda) = match stage {
             Stage::Brightness => {
-                brightness.compute(desired)?;
-                self.desired.clear();
-                self.desired.extend_from_slice(brightness.values());
+                if !common {
+                    brightness.compute(desired)?;
+                    self.desired.clear();
+                    self.desired.extend_from_slice(brightness.values());
+                }
                 (0.0, false)
             }
             Stage::Pgm {
@@ -791,9 +816,11 @@ impl<'a> Servo<'a> {
                 lambda_start,
                 optimise_lambda,
             } => {
-                let g = pgm.transform(desired, lambda_star)?;
-                self.desired.clear();
-                self.desired.extend_from_slice(g);
+                if !common {
+                    let g = pgm.transform(desired, lambda_star)?;
+                    self.desired.clear();
+                    self.desired.extend_from_slice(g);
+                }
                 (lambda_start, optimise_lambda)
             }
         };
@@ -821,15 +848,31 @@ impl<'a> Servo<'a> {
                 frame
             };
             // Feature, residuals, rows.
+            if common {
+                // The pixels compared: the rendering's hits the picture observes.
+                desired.observed(0..support.len(), support);
+                for (s, status) in support.iter_mut().zip(&frame.status) {
+                    *s &= *status == PixelStatus::Hit;
+                }
+                let desired_view = Restricted::new(desired, support)?;
+                self.desired.clear();
+                match stage {
+                    Stage::Brightness => {
+                        desired_brightness.compute(&desired_view)?;
+                        self.desired.extend_from_slice(desired_brightness.values());
+                    }
+                    Stage::Pgm { lambda_star, .. } => self
+                        .desired
+                        .extend_from_slice(desired_pgm.transform(&desired_view, lambda_star)?),
+                }
+                let view = Restricted::new(input, support)?;
+                compute_feature(stage, brightness, pgm, &view, lambda, self.config.jacobian)?;
+            } else {
+                compute_feature(stage, brightness, pgm, input, lambda, self.config.jacobian)?;
+            }
             let (values, pixel_weights): (&[f32], Option<&[f32]>) = match stage {
-                Stage::Brightness => {
-                    brightness.compute(input)?;
-                    (brightness.values(), None)
-                }
-                Stage::Pgm { .. } => {
-                    pgm.compute(input, lambda, self.config.jacobian)?;
-                    (pgm.values(), Some(pgm.weights()))
-                }
+                Stage::Brightness => (brightness.values(), None),
+                Stage::Pgm { .. } => (pgm.values(), Some(pgm.weights())),
             };
             if vignetting_on {
                 // The columns of the coefficients: the feature of each derivative picture.
@@ -842,7 +885,14 @@ impl<'a> Servo<'a> {
                     .normalize
                     .then(|| (feature.normalization_scale(), feature.image()));
                 for (k, column) in self.columns.iter_mut().enumerate() {
-                    vignetting.derivative(k, frame, feature.samples(), normalization, derivative);
+                    vignetting.derivative(
+                        k,
+                        frame,
+                        feature.samples(),
+                        feature.observed(),
+                        normalization,
+                        derivative,
+                    );
                     column.clear();
                     match stage {
                         Stage::Brightness => column.extend(
@@ -1040,6 +1090,22 @@ impl<'a> Servo<'a> {
             iterations: budget,
         })
     }
+}
+
+/// The feature of `picture` for `stage`: the brightness, or the PGM at `lambda`.
+fn compute_feature(
+    stage: Stage,
+    brightness: &mut Brightness,
+    pgm: &mut Pgm,
+    picture: &impl AnyImage,
+    lambda: f32,
+    jacobian: pgm::PgmJacobian,
+) -> Result<(), VvsError> {
+    match stage {
+        Stage::Brightness => brightness.compute(picture)?,
+        Stage::Pgm { .. } => pgm.compute(picture, lambda, jacobian)?,
+    }
+    Ok(())
 }
 
 /// Whether `position` lies outside the box `bounds` (lowest, highest corner) enlarged by

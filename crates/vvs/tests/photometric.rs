@@ -48,9 +48,10 @@ fn columns_match_finite_differences() {
         let normalized = pgm.brightness().image().to_vec();
         let scale = normalize.then(|| (pgm.brightness().normalization_scale(), &normalized[..]));
         let samples = pgm.brightness().samples().to_vec();
+        let observed = pgm.brightness().observed().to_vec();
         for k in 0..2 {
             let mut derivative = Image::new(camera.width(), camera.height());
-            model.derivative(k, &frame, &samples, scale, &mut derivative);
+            model.derivative(k, &frame, &samples, &observed, scale, &mut derivative);
             let analytic: Vec<f64> = plain
                 .transform(&derivative, 15.0)
                 .unwrap()
