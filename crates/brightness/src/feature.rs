@@ -7,6 +7,17 @@ use crate::BrightnessError;
 use crate::gradient::MaskedGradient;
 use crate::photometric;
 
+/// The picture a rendering is compared with on their common support
+/// ([`Brightness::compute_against`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Against<'a> {
+    /// The picture's intensities as compared (centred and scaled like the rendering's
+    /// when the brightness is normalised), at every pixel it observes, row-major.
+    pub intensity: &'a [f32],
+    /// Whether the picture holds an intensity at each pixel, row-major.
+    pub observed: &'a [bool],
+}
+
 /// The brightness feature of one camera, with its buffers (no allocation per image).
 #[derive(Debug, Clone)]
 pub struct Brightness {
@@ -29,6 +40,11 @@ pub struct Brightness {
     all_observed: bool,
     /// The gradient's plan of the last picture's observed pixels, when not all are.
     observed_gradient: MaskedGradient,
+    /// With a picture compared against ([`Brightness::compute_against`]): the pixels
+    /// both compare on (1) or not (0), and that picture's observed pixels.
+    compared: Vec<f32>,
+    against_observed: Vec<bool>,
+    compared_gradient: Vec<[f32; 2]>,
     image: Vec<f32>,
     inverse_range: Vec<f32>,
     gradient: Vec<[f32; 2]>,
@@ -37,6 +53,7 @@ pub struct Brightness {
     interaction: Vec<[f32; 6]>,
     normalize: bool,
     scale: f32,
+    mean: f64,
 }
 
 impl Brightness {
@@ -77,6 +94,9 @@ impl Brightness {
             observed: vec![false; n],
             all_observed: true,
             observed_gradient: MaskedGradient::default(),
+            compared: Vec::new(),
+            against_observed: Vec::new(),
+            compared_gradient: Vec::new(),
             image: vec![0.0; n],
             inverse_range: vec![0.0; n],
             gradient: vec![[0.0; 2]; n],
@@ -85,6 +105,7 @@ impl Brightness {
             interaction: vec![[0.0; 6]; m],
             normalize: false,
             scale: 1.0,
+            mean: 0.0,
         }
     }
 
@@ -134,6 +155,121 @@ impl Brightness {
         Ok(())
     }
 
+    /// [`Brightness::compute`] of a rendering compared with a picture on their common
+    /// support (beyond the paper): `rendering` observes the pixels compared (the
+    /// rendering's points that the picture sees, e.g. a `frame::Restricted` view),
+    /// normalised over them as [`Brightness::compute`] does; `against` is the picture
+    /// as compared. Values are the rendering's; the interaction rows are the
+    /// derivative of the difference of the two on that support when the camera moves:
+    /// the rendering moves with the scene and so does the edge of its points inside
+    /// the picture's observed pixels, the picture does not, so the difference changes
+    /// there by the two intensities' difference as the edge sweeps across the
+    /// picture. The gradient is `∇(H R) − P ∇H` (`H` the pixels compared, `R` the
+    /// rendering, `P` the picture, differences taken inside the picture's observed
+    /// pixels); a pixel next to the edge outside it takes the mean inverse range of
+    /// its neighbours inside (the edge's depth).
+    pub fn compute_against(
+        &mut self,
+        rendering: &impl AnyImage,
+        against: Against<'_>,
+    ) -> Result<(), BrightnessError> {
+        self.compute_pixels_against(rendering, against)?;
+        for (s, &k) in self.samples.iter().enumerate() {
+            self.values[s] = self.image[k as usize];
+            self.interaction[s] = self.pixel_interaction[k as usize];
+        }
+        Ok(())
+    }
+
+    /// The per-pixel part of [`Brightness::compute_against`] only (as
+    /// [`Brightness::compute_pixels`] is of [`Brightness::compute`]).
+    pub fn compute_pixels_against(
+        &mut self,
+        rendering: &impl AnyImage,
+        against: Against<'_>,
+    ) -> Result<(), BrightnessError> {
+        let n = self.width * self.height;
+        for (what, got) in [
+            ("picture compared against", against.intensity.len()),
+            ("its observed pixels", against.observed.len()),
+        ] {
+            if got != n {
+                return Err(BrightnessError::Length {
+                    what,
+                    got,
+                    expected: n,
+                });
+            }
+        }
+        self.compute_pixels(rendering)?;
+        self.edge_of_support(against);
+        Ok(())
+    }
+
+    /// The interaction rows of [`Brightness::compute_against`], after
+    /// [`Brightness::compute_pixels`] of the rendering on the compared pixels.
+    fn edge_of_support(&mut self, against: Against<'_>) {
+        let (w, h, n) = (self.width, self.height, self.width * self.height);
+        let valid = self.grid.valid();
+        self.compared.clear();
+        self.compared
+            .extend(self.observed.iter().map(|&o| if o { 1.0 } else { 0.0 }));
+        self.against_observed.clear();
+        self.against_observed
+            .extend(against.observed.iter().zip(valid).map(|(&a, &v)| a && v));
+        self.compared_gradient.clear();
+        self.compared_gradient.resize(n, [0.0; 2]);
+        // ∇(H R) and ∇H, inside the picture's observed pixels.
+        self.observed_gradient.rebuild(&self.against_observed, w, h);
+        self.gradient.fill([0.0; 2]);
+        self.observed_gradient
+            .compute(&self.image, &self.against_observed, &mut self.gradient);
+        self.observed_gradient.compute(
+            &self.compared,
+            &self.against_observed,
+            &mut self.compared_gradient,
+        );
+        for k in 0..n {
+            if !self.against_observed[k] {
+                self.gradient[k] = [0.0; 2];
+                continue;
+            }
+            let p = against.intensity[k];
+            let [hu, hv] = self.compared_gradient[k];
+            self.gradient[k][0] -= p * hu;
+            self.gradient[k][1] -= p * hv;
+            // Outside the compared pixels, next to them: the edge's inverse range.
+            if !self.observed[k] && (hu != 0.0 || hv != 0.0) {
+                let (x, y) = (k % w, k / w);
+                let (mut sum, mut count) = (0.0f32, 0u32);
+                for (nx, ny) in [
+                    (x.wrapping_sub(1), y),
+                    (x + 1, y),
+                    (x, y.wrapping_sub(1)),
+                    (x, y + 1),
+                ] {
+                    if nx < w && ny < h && self.observed[ny * w + nx] {
+                        sum += self.inverse_range[ny * w + nx];
+                        count += 1;
+                    }
+                }
+                self.inverse_range[k] = if count > 0 { sum / count as f32 } else { 0.0 };
+            }
+        }
+        let mut first = 0;
+        for &[start, end] in &self.valid_runs {
+            let (run, n) = (start as usize..end as usize, (end - start) as usize);
+            photometric::rows(photometric::Run {
+                u: &self.factors_u[first..first + n],
+                v: &self.factors_v[first..first + n],
+                gradient: &self.gradient[run.clone()],
+                inverse_range: &self.inverse_range[run.clone()],
+                out: &mut self.pixel_interaction[run],
+            });
+            first += n;
+        }
+    }
+
     /// The body of [`Brightness::compute_pixels`], once the size is checked.
     #[inline(always)]
     fn pixels(&mut self, picture: &impl AnyImage) {
@@ -156,6 +292,7 @@ impl Brightness {
         self.inverse_range[end..].fill(0.0);
         self.all_observed = all_observed;
         self.scale = 1.0;
+        self.mean = 0.0;
         if !all_observed {
             self.partly_observed();
             return;
@@ -180,6 +317,7 @@ impl Brightness {
                 self.image[k] = ((f64::from(self.image[k]) - mean) * scale) as f32;
             }
             self.scale = scale as f32;
+            self.mean = mean;
         }
         // The gradient and the interaction rows are zero outside the region from the
         // start, and only the region is written.
@@ -225,6 +363,7 @@ impl Brightness {
                 };
             }
             self.scale = scale as f32;
+            self.mean = mean;
         }
         self.observed_gradient
             .rebuild(&self.observed, self.width, self.height);
@@ -319,6 +458,11 @@ impl Brightness {
     /// The factor applied by normalisation to the last image (1 without).
     pub fn normalization_scale(&self) -> f32 {
         self.scale
+    }
+
+    /// The mean subtracted by normalisation from the last image (0 without).
+    pub fn normalization_mean(&self) -> f64 {
+        self.mean
     }
 }
 

@@ -111,3 +111,175 @@ fn feature_rows_are_the_photometric_rows_of_the_grid() {
     }
     assert!(feature.compute(&Frame::new(3, 3)).is_err());
 }
+
+/// A 64×48 catadioptric camera with an annulus, and a smooth frame on it whose hits
+/// leave holes (every pixel of a disc and of a band is sky).
+fn holed_scene() -> (Camera, Frame) {
+    let camera = Camera::new(
+        Intrinsics {
+            alpha_u: 30.0,
+            alpha_v: 30.0,
+            u0: 31.5,
+            v0: 23.5,
+            xi: 0.9,
+            skew: 0.0,
+        },
+        None,
+        64,
+        48,
+        ValidRegion::Annulus(ucm::Annulus {
+            center_px: [31.5, 23.5],
+            inner_radius_px: 5.0,
+            outer_radius_px: 22.0,
+        }),
+    )
+    .unwrap();
+    let mut frame = Frame::for_camera(&camera);
+    for k in 0..frame.intensity.len() {
+        let (x, y) = ((k % 64) as f32, (k / 64) as f32);
+        frame.intensity[k] = 0.5 + 0.3 * (x * 0.3).sin() * (y * 0.2).cos();
+        frame.range_m[k] = 2.0 + (k % 5) as f32;
+        let hole = (x - 20.0).powi(2) + (y - 20.0).powi(2) < 25.0 || (30.0..33.0).contains(&x);
+        frame.status[k] = match (camera.valid_pixels()[k], hole) {
+            (false, _) => PixelStatus::Masked,
+            (true, true) => PixelStatus::Sky,
+            (true, false) => PixelStatus::Hit,
+        };
+    }
+    (camera, frame)
+}
+
+/// A picture that holds intensities on part of the region is normalised over those
+/// pixels alone, is 0 elsewhere, and has its gradient inside them.
+#[test]
+fn a_partly_observed_picture_is_normalised_and_differentiated_where_it_is_observed() {
+    use frame::Restricted;
+    let (camera, frame) = holed_scene();
+    let hits: Vec<bool> = frame
+        .status
+        .iter()
+        .map(|&s| s == PixelStatus::Hit)
+        .collect();
+    let view = Restricted::new(&frame, &hits).unwrap();
+    let mut feature = Brightness::new(&camera).with_normalization(true);
+    feature.compute(&view).unwrap();
+    assert!(!feature.all_observed());
+    let image = feature.image();
+    let (mut sum, mut squares) = (0.0f64, 0.0f64);
+    for k in 0..image.len() {
+        if hits[k] {
+            sum += f64::from(image[k]);
+            squares += f64::from(image[k]).powi(2);
+        } else {
+            assert_eq!(image[k], 0.0, "pixel {k} not observed");
+        }
+        assert_eq!(feature.observed()[k], hits[k]);
+    }
+    assert!(sum.abs() < 1e-4, "mean {sum}");
+    assert!((squares - 1.0).abs() < 1e-4, "norm² {squares}");
+    let mut expected = vec![[0.0f32; 2]; image.len()];
+    masked_gradient(image, &hits, 64, 48, &mut expected);
+    assert_eq!(feature.gradient(), &expected[..]);
+    // Every pixel observed: the plain path, bit for bit.
+    let all = vec![true; image.len()];
+    let mut plain = Brightness::new(&camera).with_normalization(true);
+    plain.compute(&frame).unwrap();
+    feature
+        .compute(&Restricted::new(&frame, &all).unwrap())
+        .unwrap();
+    assert!(feature.all_observed());
+    assert_eq!(feature.values(), plain.values());
+    assert_eq!(feature.interaction(), plain.interaction());
+}
+
+/// Against a picture, the gradient is `∇(H R) − P ∇H` inside the picture's observed
+/// pixels, and the pixels next to the support's edge outside it take their neighbours'
+/// inverse range; the values are the rendering's.
+#[test]
+fn rows_against_a_picture_follow_the_edge_of_the_support() {
+    use brightness::Against;
+    use frame::Restricted;
+    let (camera, frame) = holed_scene();
+    let (w, h, n) = (64, 48, 64 * 48);
+    let hits: Vec<bool> = frame
+        .status
+        .iter()
+        .map(|&s| s == PixelStatus::Hit)
+        .collect();
+    // The picture observes the region but a corner.
+    let observed: Vec<bool> = (0..n)
+        .map(|k| camera.valid_pixels()[k] && !(k % w > 45 && k / w > 30))
+        .collect();
+    let picture: Vec<f32> = (0..n)
+        .map(|k| {
+            if observed[k] {
+                0.4 + 0.01 * (k % 7) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let support: Vec<bool> = hits.iter().zip(&observed).map(|(&a, &b)| a && b).collect();
+    let view = Restricted::new(&frame, &support).unwrap();
+    let mut feature = Brightness::new(&camera);
+    let against = Against {
+        intensity: &picture,
+        observed: &observed,
+    };
+    feature.compute_against(&view, against).unwrap();
+    let mut plain = Brightness::new(&camera);
+    plain.compute(&view).unwrap();
+    assert_eq!(feature.values(), plain.values());
+    let masked: Vec<f32> = (0..n)
+        .map(|k| if support[k] { frame.intensity[k] } else { 0.0 })
+        .collect();
+    let indicator: Vec<f32> = support.iter().map(|&s| f32::from(u8::from(s))).collect();
+    let (mut g_r, mut g_h) = (vec![[0.0f32; 2]; n], vec![[0.0f32; 2]; n]);
+    masked_gradient(&masked, &observed, w, h, &mut g_r);
+    masked_gradient(&indicator, &observed, w, h, &mut g_h);
+    let grid = PixelGrid::new(&camera);
+    let mut edge_pixels = 0;
+    for k in 0..n {
+        let expected = [
+            g_r[k][0] - picture[k] * g_h[k][0],
+            g_r[k][1] - picture[k] * g_h[k][1],
+        ];
+        let got = feature.gradient()[k];
+        for c in 0..2 {
+            assert!(
+                (got[c] - expected[c]).abs() < 1e-6,
+                "pixel {k}: {got:?} vs {expected:?}"
+            );
+        }
+        if observed[k] && !support[k] && g_h[k] != [0.0; 2] {
+            edge_pixels += 1;
+            let (x, y) = (k % w, k / w);
+            let neighbours: Vec<f32> = [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)]
+                .into_iter()
+                .map(|(a, b)| b * w + a)
+                .filter(|&j| support[j])
+                .map(|j| 1.0 / frame.range_m[j])
+                .collect();
+            let inverse = neighbours.iter().sum::<f32>() / neighbours.len().max(1) as f32;
+            let row = grid.factors()[k].photometric(got, inverse);
+            let s = feature
+                .samples()
+                .iter()
+                .position(|&p| p as usize == k)
+                .unwrap();
+            for c in 0..6 {
+                assert!(
+                    (feature.interaction()[s][c] - row[c]).abs() < 1e-5,
+                    "pixel {k}"
+                );
+            }
+        }
+    }
+    assert!(edge_pixels > 20, "{edge_pixels} pixels on the edge");
+    // Buffers of the wrong size are refused.
+    let short = Against {
+        intensity: &picture[1..],
+        observed: &observed,
+    };
+    assert!(feature.compute_against(&view, short).is_err());
+}

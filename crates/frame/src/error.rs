@@ -60,6 +60,9 @@ pub enum FrameError {
         /// [`ucm::MAX_PIXELS`].
         limit: u64,
     },
+    /// A camera could not be built.
+    #[error(transparent)]
+    Camera(#[from] ucm::UcmError),
     /// Reading, decoding or writing a picture failed.
     #[error("image {path}: {source}")]
     Image {

@@ -4,11 +4,13 @@
 mod error;
 mod frame;
 mod image;
+mod resample;
 mod restricted;
 
 pub use error::FrameError;
 pub use frame::{Frame, PixelStatus};
 pub use image::Image;
+pub use resample::seen_through;
 pub use restricted::Restricted;
 
 /// What a feature reads from a picture, measured ([`Image`]) or rendered ([`Frame`]):

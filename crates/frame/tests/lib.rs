@@ -1,3 +1,4 @@
 //! Integration tests of `frame`, one binary.
 
 mod pictures;
+mod views;

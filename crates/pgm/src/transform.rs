@@ -1,7 +1,7 @@
 //! [`Pgm`]: the photometric Gaussian mixture of an omnidirectional image, its
 //! λ-derivative and its interaction matrix, on a fixed sample grid.
 
-use brightness::Brightness;
+use brightness::{Against, Brightness};
 use frame::AnyImage;
 use ucm::Camera;
 
@@ -477,6 +477,28 @@ impl Pgm {
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute_pixels(picture)?;
+        self.features(lambda, jacobian)
+    }
+
+    /// [`Pgm::compute`] of a rendering compared with a picture on their common support
+    /// (beyond the paper): the brightness of
+    /// [`brightness::Brightness::compute_against`], whose interaction rows follow the
+    /// edge of the support as the camera moves; the Convolved `L_G` is then the
+    /// derivative of the difference of the two pictures' `G` on that support.
+    pub fn compute_against(
+        &mut self,
+        rendering: &impl AnyImage,
+        against: Against<'_>,
+        lambda: f32,
+        jacobian: PgmJacobian,
+    ) -> Result<(), PgmError> {
+        Self::check_lambda(lambda)?;
+        self.brightness.compute_pixels_against(rendering, against)?;
+        self.features(lambda, jacobian)
+    }
+
+    /// `G`, `J_λ` and `L_G` of the brightness's last picture.
+    fn features(&mut self, lambda: f32, jacobian: PgmJacobian) -> Result<(), PgmError> {
         let paper = matches!(jacobian, PgmJacobian::Paper { .. });
         if let Some(f) = self.filters(lambda, true, paper) {
             self.recursive_g_j(&f, true);

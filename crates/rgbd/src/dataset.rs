@@ -202,7 +202,11 @@ fn read_matrices(path: &Path) -> Result<Vec<Isometry3>, RgbdError> {
         .into_iter()
         .flat_map(|(_, n)| n)
         .collect();
-    let per = if numbers.len().is_multiple_of(16) { 16 } else { 12 };
+    let per = if numbers.len().is_multiple_of(16) {
+        16
+    } else {
+        12
+    };
     if numbers.is_empty() || !numbers.len().is_multiple_of(per) {
         return Err(RgbdError::Pose {
             path: path.to_owned(),

@@ -30,7 +30,7 @@ use frame::{AnyImage, Image};
 use splat::PointCloud;
 use ucm::{Camera, Isometry3};
 
-use crate::{Method, Outcome, PriorBox, Servo, VvsConfig, VvsError};
+use crate::{Method, Outcome, PriorBox, Servo, Support, VvsConfig, VvsError};
 
 /// Where the camera's calibration comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,7 +81,9 @@ pub struct Localized {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Localizer {
     /// The optimiser's settings. [`Localizer::default`] is the paper's, with the
-    /// brightness normalised (§4) and no per-iteration history.
+    /// brightness normalised (§4), the pictures compared on their common support
+    /// ([`Support::Common`]: a real cloud has holes and never saw everything a picture
+    /// sees) and no per-iteration history.
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2).
     pub method: Method,
@@ -96,6 +98,7 @@ impl Default for Localizer {
         Self {
             config: VvsConfig {
                 normalize: true,
+                support: Support::Common,
                 keep_history: false,
                 ..VvsConfig::default()
             },

@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use brightness::{Brightness, normal_equations, normal_equations_with_column};
+use brightness::{Against, Brightness, normal_equations, normal_equations_with_column};
 use frame::{AnyImage, Frame, Image, PixelStatus, Restricted};
 use glam::DVec3;
 use pgm::{Pgm, PgmOptions};
@@ -67,6 +67,9 @@ struct Level {
     desired_pgm: Pgm,
     desired_brightness: Brightness,
     support: Vec<bool>,
+    /// The desired picture as compared, at every pixel it observes, and those pixels.
+    against: Vec<f32>,
+    against_observed: Vec<bool>,
 }
 
 impl Level {
@@ -118,6 +121,8 @@ impl Level {
             )?,
             desired_brightness: Brightness::new(&camera).with_normalization(config.normalize),
             support: vec![false; camera.pixel_count()],
+            against: vec![0.0; camera.pixel_count()],
+            against_observed: vec![false; camera.pixel_count()],
             camera,
         })
     }
@@ -797,6 +802,8 @@ impl<'a> Servo<'a> {
             desired_pgm,
             desired_brightness,
             support,
+            against,
+            against_observed,
         } = &mut self.levels[level];
         let vignetting_on = self.config.vignetting;
         let common = self.config.support == Support::Common;
@@ -850,23 +857,56 @@ impl<'a> Servo<'a> {
             // Feature, residuals, rows.
             if common {
                 // The pixels compared: the rendering's hits the picture observes.
-                desired.observed(0..support.len(), support);
-                for (s, status) in support.iter_mut().zip(&frame.status) {
-                    *s &= *status == PixelStatus::Hit;
+                desired.observed(0..support.len(), against_observed);
+                for ((s, &o), status) in support
+                    .iter_mut()
+                    .zip(&*against_observed)
+                    .zip(&frame.status)
+                {
+                    *s = o && *status == PixelStatus::Hit;
                 }
                 let desired_view = Restricted::new(desired, support)?;
                 self.desired.clear();
-                match stage {
+                let normalized = match stage {
                     Stage::Brightness => {
                         desired_brightness.compute(&desired_view)?;
                         self.desired.extend_from_slice(desired_brightness.values());
+                        &*desired_brightness
                     }
-                    Stage::Pgm { lambda_star, .. } => self
-                        .desired
-                        .extend_from_slice(desired_pgm.transform(&desired_view, lambda_star)?),
+                    Stage::Pgm { lambda_star, .. } => {
+                        self.desired
+                            .extend_from_slice(desired_pgm.transform(&desired_view, lambda_star)?);
+                        desired_pgm.brightness()
+                    }
+                };
+                // The desired picture as compared, beyond the support too (where the
+                // support's edge sweeps).
+                let (mean, scale) = (
+                    normalized.normalization_mean(),
+                    f64::from(normalized.normalization_scale()),
+                );
+                for ((a, &i), &o) in against
+                    .iter_mut()
+                    .zip(desired.intensity())
+                    .zip(&*against_observed)
+                {
+                    *a = if o {
+                        ((f64::from(i) - mean) * scale) as f32
+                    } else {
+                        0.0
+                    };
                 }
                 let view = Restricted::new(input, support)?;
-                compute_feature(stage, brightness, pgm, &view, lambda, self.config.jacobian)?;
+                let against = Against {
+                    intensity: against,
+                    observed: against_observed,
+                };
+                match stage {
+                    Stage::Brightness => brightness.compute_against(&view, against)?,
+                    Stage::Pgm { .. } => {
+                        pgm.compute_against(&view, against, lambda, self.config.jacobian)?
+                    }
+                }
             } else {
                 compute_feature(stage, brightness, pgm, input, lambda, self.config.jacobian)?;
             }

@@ -11,4 +11,5 @@ mod localize;
 mod photometric;
 mod pipeline;
 mod pipeline_support;
+mod support;
 mod track;

@@ -112,3 +112,76 @@ fn brightness_li_matches_the_pipeline() {
         assert!(*cos > 0.3, "{}: cosine {cos}", AXES[axis]);
     }
 }
+
+/// Compared with a picture on their common support (`Support::Common`: the rendering's
+/// hits), the difference of the two `G` changes as the camera moves both inside the
+/// support and where its edge sweeps across the picture: `Pgm::compute_against`'s
+/// `L_G` is the derivative of that difference, and the rows of the rendering alone
+/// (its gradient inside the support, blind to the edge) are not.
+#[test]
+fn convolved_lg_against_a_picture_on_the_common_support_matches_the_pipeline() {
+    use brightness::Against;
+    use frame::{Image, PixelStatus, Restricted};
+    let camera = crate::common::fixture();
+    let pose = street_pose();
+    // The picture: the street from 30 cm and 2° away.
+    let picture = Image::from_frame(&render(
+        &camera,
+        &(pose * ucm::Isometry3::from_pose_vector([0.3, -0.2, 0.1, 0.0, 0.0, 0.035]).unwrap()),
+    ));
+    let observed = picture.valid.clone();
+    let hits = |frame: &frame::Frame| -> Vec<bool> {
+        frame
+            .status
+            .iter()
+            .zip(&observed)
+            .map(|(&s, &o)| o && s == PixelStatus::Hit)
+            .collect()
+    };
+    let lambda = 15.0;
+    let options = PgmOptions::default();
+    let base = render(&camera, &pose);
+    let support = hits(&base);
+    assert!(
+        support.iter().zip(&observed).any(|(&s, &o)| o && !s),
+        "the street view has sky"
+    );
+    let mut pgm = Pgm::new(&camera, options).unwrap();
+    let against = Against {
+        intensity: &picture.intensity,
+        observed: &observed,
+    };
+    let view = Restricted::new(&base, &support).unwrap();
+    pgm.compute_against(&view, against, lambda, PgmJacobian::Convolved)
+        .unwrap();
+    let rows = pgm.interaction().to_vec();
+    pgm.compute(&view, lambda, PgmJacobian::Convolved).unwrap();
+    let blind = pgm.interaction().to_vec();
+    let mut desired = Pgm::new(&camera, options).unwrap();
+    let (mut with_edge, mut without) = (0.0, 0.0);
+    for axis in 0..6 {
+        let numeric = pipeline_difference(&camera, &pose, unit(axis), eps(axis), |frame| {
+            let support = hits(frame);
+            let g = pgm
+                .transform(&Restricted::new(frame, &support).unwrap(), lambda)
+                .unwrap()
+                .to_vec();
+            let g_star = desired
+                .transform(&Restricted::new(&picture, &support).unwrap(), lambda)
+                .unwrap();
+            g.iter().zip(g_star).map(|(a, b)| a - b).collect()
+        });
+        let column =
+            |rows: &[[f32; 6]]| -> Vec<f64> { rows.iter().map(|r| f64::from(r[axis])).collect() };
+        let (cos, rel) = compare(&column(&rows), &numeric);
+        let (cos_blind, _) = compare(&column(&blind), &numeric);
+        eprintln!(
+            "Convolved against the picture, λ=15 {}: cosine {cos:.3} (rendering alone {cos_blind:.3}), relative error {rel:.3}",
+            AXES[axis]
+        );
+        assert!(cos > 0.85, "{}: cosine {cos}", AXES[axis]);
+        with_edge += cos;
+        without += cos_blind;
+    }
+    assert!(with_edge > without + 0.1, "{with_edge} vs {without}");
+}
