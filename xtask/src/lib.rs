@@ -54,6 +54,17 @@ commands:
                        (sequence-long.toml); --quick: their CI subsets (*-quick*.toml).
                        Results (frames.csv, summary.md, plots, overlays) in results/fig4*/
                        and results/long*/, checked for consistency.
+  reproduce-real [--quick] [--seven-scenes DIR] [--portable]
+                       real photographs localised and tracked in clouds fused from RGB-D
+                       frames (fixtures/real/bench-*.toml): the house of
+                       $PGM_DATA_DIR/rgbd/house (default ../shared/data), each picture left
+                       out of a cloud of the others; with --seven-scenes DIR, 7-Scenes
+                       redkitchen seq-01 (the folder data/ of the GitHub repository
+                       andyzeng/tsdf-fusion-python; non-commercial licence, never
+                       committed): localisation near the map and in a held-out block, a
+                       global search, tracking, the queries resampled to a catadioptric
+                       camera. Results in results/real/<name>/ (summary.md, runs.csv,
+                       tracking.csv, plots, pictures/). --quick: the house's CI subset.
 
   All build bench-conv in release mode for this machine's instruction set
   (-C target-cpu=native, in target/native): the same numbers bit for bit, about 20 %
@@ -114,6 +125,24 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
         "reproduce-fig4" => {
             let (quick, build) = quick_and_build(rest)?;
             reproduce::fig4(quick, build)
+        }
+        "reproduce-real" => {
+            let (mut quick, mut seven_scenes, mut build) = (false, None, Build::Native);
+            let mut flags = rest.iter();
+            while let Some(flag) = flags.next() {
+                match flag.as_str() {
+                    "--quick" => quick = true,
+                    "--portable" => build = Build::Portable,
+                    "--seven-scenes" => {
+                        let dir = flags
+                            .next()
+                            .with_context(|| format!("--seven-scenes needs a folder\n\n{HELP}"))?;
+                        seven_scenes = Some(PathBuf::from(dir));
+                    }
+                    other => bail!("unknown flag `{other}`\n\n{HELP}"),
+                }
+            }
+            reproduce::real(quick, seven_scenes.as_deref(), build)
         }
         "help" | "--help" | "-h" => {
             print!("{HELP}");

@@ -205,3 +205,118 @@ fn check(
     }
     bench_conv(&args, build)
 }
+
+/// How to get the 7-Scenes frames of `reproduce-real --seven-scenes`.
+const SEVEN_SCENES_HELP: &str = "7-Scenes redkitchen seq-01 (1000 frames, Microsoft's \
+non-commercial research licence: never commit them) is the folder data/ of the GitHub \
+repository andyzeng/tsdf-fusion-python: `git clone --depth 1 \
+https://github.com/andyzeng/tsdf-fusion-python` and pass \
+`--seven-scenes tsdf-fusion-python/data`";
+
+/// The shared data folder: `PGM_DATA_DIR`, else `../shared/data` beside the checkout.
+fn data_dir() -> std::path::PathBuf {
+    std::env::var_os("PGM_DATA_DIR")
+        .map(Into::into)
+        .unwrap_or_else(|| project_root().join("../shared/data"))
+}
+
+/// Run the real-data benchmarks: the house of the shared data (or its quick subset),
+/// and 7-Scenes redkitchen when its frames are given; then check that the localiser
+/// reached its pictures' photometric optimum.
+pub fn real(
+    quick: bool,
+    seven_scenes: Option<&std::path::Path>,
+    build: Build,
+) -> anyhow::Result<()> {
+    let root = project_root();
+    let house = data_dir().join("rgbd/house");
+    ensure!(
+        house.is_dir(),
+        "no house pictures at {} (set PGM_DATA_DIR to the shared data folder)",
+        house.display()
+    );
+    let mut runs = vec![(
+        if quick {
+            "bench-house-quick.toml"
+        } else {
+            "bench-house.toml"
+        },
+        house,
+        if quick { "house-quick" } else { "house" },
+    )];
+    match seven_scenes {
+        Some(dir) => {
+            ensure!(
+                dir.join("frame-000000.color.jpg").is_file()
+                    && dir.join("frame-000999.pose.txt").is_file(),
+                "{} does not hold the 7-Scenes frames frame-000000 to frame-000999. {SEVEN_SCENES_HELP}",
+                dir.display()
+            );
+            runs.push(("bench-redkitchen.toml", dir.to_path_buf(), "redkitchen"));
+        }
+        None if !quick => eprintln!("7-Scenes skipped: {SEVEN_SCENES_HELP}."),
+        None => {}
+    }
+    for (bench, data, out) in runs {
+        let out = root.join("results/real").join(out);
+        bench_conv(
+            &[
+                "real".as_ref(),
+                root.join("fixtures/real").join(bench).as_os_str(),
+                "--data".as_ref(),
+                data.as_os_str(),
+                "--out".as_ref(),
+                out.as_os_str(),
+            ],
+            build,
+        )?;
+        check_real(&out)?;
+    }
+    Ok(())
+}
+
+/// The localiser's runs of a real benchmark (`runs.csv`) end near their pictures'
+/// photometric optimum: at least 4 in 5 within 2 cm of it, from every start.
+fn check_real(out: &std::path::Path) -> anyhow::Result<()> {
+    let path = out.join("runs.csv");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .context("an empty runs.csv")?
+        .split(',')
+        .collect();
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .with_context(|| format!("{}: no column {name}", path.display()))
+    };
+    let (method, reference) = (column("method")?, column("to_reference_m")?);
+    let (mut runs, mut near) = (0, 0);
+    for line in lines {
+        let fields: Vec<&str> = line.split(',').collect();
+        if fields.get(method) == Some(&"localizer") {
+            runs += 1;
+            if fields
+                .get(reference)
+                .and_then(|v| v.parse::<f64>().ok())
+                .is_some_and(|d| d < 0.02)
+            {
+                near += 1;
+            }
+        }
+    }
+    ensure!(runs > 0, "{}: no localiser run", path.display());
+    ensure!(
+        5 * near >= 4 * runs,
+        "{}: the localiser ended within 2 cm of the photometric optimum in {near} of {runs} runs",
+        path.display()
+    );
+    println!(
+        "checked: the localiser ended within 2 cm of the photometric optimum in {near} of {runs} runs ({})",
+        out.display()
+    );
+    Ok(())
+}

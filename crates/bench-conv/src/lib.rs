@@ -19,6 +19,11 @@
 //!   acquired-looking images ([`world::sequence`]) and track it by successive alignments
 //!   ([`tracking`], the paper's §4): `frames.csv`, `summary.md`, trajectory and error
 //!   plots, and the superimpositions of the paper's Fig. 4d–e;
+//! * `bench-conv fuse --dataset D.toml --data DIR --frames 0-999/10 --out C.laz`: fuse
+//!   RGB-D frames into a coloured cloud ([`rgbd`]);
+//! * `bench-conv real BENCH.toml --data DIR --out DIR`: the real-data benchmark
+//!   ([`real`]): real photographs localised and tracked in clouds fused from RGB-D
+//!   frames;
 //! * `bench-conv check PROTOCOL.toml --out DIR [--quick] [--extras]` and
 //!   `bench-conv check-track SEQUENCE.toml --out DIR`: check a results folder against
 //!   the file that made it ([`check`]).
@@ -27,6 +32,7 @@
 pub mod check;
 pub mod progress;
 pub mod protocol;
+pub mod real;
 pub mod real_image;
 pub mod report;
 pub mod run;

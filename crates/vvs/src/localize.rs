@@ -80,10 +80,13 @@ pub struct Localized {
 /// How to localise: the optimiser's settings, the method, and an optional prior box.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Localizer {
-    /// The optimiser's settings. [`Localizer::default`] is the paper's, with the
-    /// brightness normalised (§4), the pictures compared on their common support
-    /// ([`Support::Common`]: a real cloud has holes and never saw everything a picture
-    /// sees) and no per-iteration history.
+    /// The optimiser's settings. [`Localizer::default`] is the paper's rules with the
+    /// brightness normalised (§4), and beyond the paper the pictures compared on their
+    /// common support ([`Support::Common`]: a real cloud has holes and never saw
+    /// everything a picture sees) and Levenberg–Marquardt steps of gain 1
+    /// (`levenberg_marquardt = 0.1`: half the iterations of the paper's gain of 0.2,
+    /// the same convergence domain on the synthetic city; `docs/RESULTS.md`), no
+    /// per-iteration history.
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2).
     pub method: Method,
@@ -99,6 +102,8 @@ impl Default for Localizer {
             config: VvsConfig {
                 normalize: true,
                 support: Support::Common,
+                gain: 1.0,
+                levenberg_marquardt: Some(0.1),
                 keep_history: false,
                 ..VvsConfig::default()
             },

@@ -146,6 +146,9 @@ pub struct Servo<'a> {
     search_weights: Vec<f32>,
     /// Per orientation: whether only some samples are compared (a tilt).
     search_masked: Vec<bool>,
+    /// With [`Support::Common`]: the desired picture turned back by each orientation
+    /// (its PGM is taken on each node's common support).
+    search_pictures: Vec<Image>,
     rows9: Vec<[f32; 9]>,
     columns: [Vec<f32>; 2],
     vignetting_start: [f64; 2],
@@ -181,6 +184,7 @@ impl<'a> Servo<'a> {
             search_desired: Vec::new(),
             search_weights: Vec::new(),
             search_masked: Vec::new(),
+            search_pictures: Vec::new(),
             rows9: Vec::new(),
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
@@ -387,9 +391,22 @@ impl<'a> Servo<'a> {
         self.search_desired.clear();
         self.search_weights.clear();
         self.search_masked.clear();
+        self.search_pictures.clear();
+        let common = self.config.support == Support::Common;
         for &[x, y, heading] in &orientations {
             let level = &mut self.levels[search];
             let g_star = if [x, y, heading] == [0.0; 3] {
+                if common {
+                    let n = desired_small.intensity().len();
+                    let mut observed = vec![false; n];
+                    desired_small.observed(0..n, &mut observed);
+                    self.search_pictures.push(Image::from_parts(
+                        desired_small.width(),
+                        desired_small.height(),
+                        desired_small.intensity().to_vec(),
+                        observed,
+                    )?);
+                }
                 level.pgm.transform(&desired_small, lambda)?
             } else if [x, y] == [0.0; 2] {
                 // A turn about the optical axis keeps the field: every sample compared
@@ -399,6 +416,9 @@ impl<'a> Servo<'a> {
                     &level.camera,
                     -heading,
                 )?;
+                if common {
+                    self.search_pictures.push(turned.clone());
+                }
                 level.pgm.transform(&turned, lambda)?
             } else {
                 // A tilted view loses part of the field: compare only the samples
@@ -419,6 +439,9 @@ impl<'a> Servo<'a> {
                     .zip(level.pgm.samples())
                 {
                     *w = if clear[k as usize] { 1.0 } else { 0.0 };
+                }
+                if common {
+                    self.search_pictures.push(turned.clone());
                 }
                 level.pgm.transform(&turned, lambda)?
             };
@@ -588,11 +611,45 @@ impl<'a> Servo<'a> {
             renderer,
             frame,
             pgm,
+            desired_pgm,
+            support,
             ..
         } = &mut self.levels[level];
         let stats = renderer.render(self.cloud, &world_from_camera.inverse(), frame)?;
         let valid = camera.valid_pixel_count().max(1) as f64;
         if (stats.pixels_hit as f64) / valid < self.config.min_hit_fraction {
+            return Ok(());
+        }
+        if self.config.support == Support::Common {
+            // Each orientation on its own common support: the node's hits that the
+            // turned picture observes.
+            let samples = pgm.samples().len().max(1);
+            for (((cost, picture), weights), &masked) in costs
+                .iter_mut()
+                .zip(&self.search_pictures)
+                .zip(self.search_weights.chunks_exact(samples))
+                .zip(&self.search_masked)
+            {
+                for ((s, &o), status) in support.iter_mut().zip(&picture.valid).zip(&frame.status) {
+                    *s = o && *status == PixelStatus::Hit;
+                }
+                let g = pgm.transform(&Restricted::new(&*frame, support)?, lambda)?;
+                self.scratch.clear();
+                self.scratch.extend_from_slice(g);
+                let g_star = desired_pgm.transform(&Restricted::new(picture, support)?, lambda)?;
+                let (mut sum, mut count) = (0.0f64, 0.0f64);
+                for (k, (&a, &b)) in self.scratch.iter().zip(g_star).enumerate() {
+                    let w = if masked { f64::from(weights[k]) } else { 1.0 };
+                    let e = f64::from(a - b);
+                    sum += w * e * e;
+                    count += w;
+                }
+                *cost = if count > 0.0 {
+                    sum / count
+                } else {
+                    f64::INFINITY
+                };
+            }
             return Ok(());
         }
         let g = pgm.transform(frame, lambda)?;

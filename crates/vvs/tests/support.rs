@@ -3,7 +3,6 @@
 
 use glam::DVec3;
 use splat::PointCloud;
-use ucm::Isometry3;
 use vvs::{Localizer, Method, Servo, Support, VvsConfig};
 
 use crate::common::*;
@@ -77,7 +76,8 @@ fn the_localizer_compares_on_the_common_support() {
     assert_eq!(localizer.config.support, Support::Common);
     assert!(localizer.config.normalize);
     assert_eq!(localizer.method, Method::Rule2);
+    assert_eq!(localizer.config.gain, 1.0);
+    assert_eq!(localizer.config.levenberg_marquardt, Some(0.1));
     // The paper's settings stay the optimiser's defaults.
     assert_eq!(VvsConfig::default().support, Support::Region);
-    let _ = Isometry3::IDENTITY;
 }

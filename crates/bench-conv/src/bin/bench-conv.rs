@@ -138,6 +138,18 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The real-data benchmark (format: crates/bench-conv/src/real/mod.rs): real
+    /// photographs localised and tracked in clouds fused from RGB-D frames.
+    Real {
+        /// The benchmark file.
+        benchmark: PathBuf,
+        /// The folder of the dataset's frames.
+        #[arg(long)]
+        data: PathBuf,
+        /// Results folder (created).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Check a protocol's results folder against the protocol file.
     Check {
         /// The protocol file.
@@ -496,6 +508,31 @@ fn main() -> anyhow::Result<()> {
             );
             splat::write_las(&cloud, &out)?;
             println!("wrote {}", out.display());
+        }
+        Command::Real {
+            benchmark,
+            data,
+            out,
+        } => {
+            let started = Instant::now();
+            let spec = bench_conv::real::RealSpec::load(&benchmark)?;
+            anyhow::ensure!(
+                data.is_dir(),
+                "the data folder {} does not exist",
+                data.display()
+            );
+            bench_conv::report::begin_results(&out)?;
+            let (prepared, records, tracks) = bench_conv::real::run_benchmark(spec, &data)?;
+            let summary = bench_conv::real::write_results(
+                &prepared,
+                &records,
+                &tracks,
+                started.elapsed().as_secs_f64(),
+                &out,
+            )?;
+            bench_conv::report::finish_results(&out)?;
+            println!("{summary}");
+            println!("results in {}", out.display());
         }
         Command::Check {
             protocol,

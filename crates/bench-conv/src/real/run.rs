@@ -1,0 +1,641 @@
+//! Preparing a benchmark (clouds, queries, pictures) and running it: every
+//! localisation in parallel over rayon, each on one thread, the results in a stable
+//! order whatever the thread count.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, ensure};
+use frame::Image;
+use rayon::prelude::*;
+use serde::Serialize;
+use splat::PointCloud;
+use ucm::{Camera, Isometry3};
+use vvs::{Method, Outcome, Servo, StopReason, Tracker, VvsConfig};
+
+use super::spec::{BenchMethod, RealSpec, Split};
+use crate::progress::Progress;
+
+/// Why a frame is a query.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum QueryKind {
+    /// Left out of its cloud, which holds every other frame.
+    LeftOut,
+    /// Between map frames.
+    Near,
+    /// Inside the block held out of the map.
+    Block,
+}
+
+impl QueryKind {
+    /// Its name in tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            QueryKind::LeftOut => "left out",
+            QueryKind::Near => "near the map",
+            QueryKind::Block => "held-out block",
+        }
+    }
+}
+
+/// The frames of a cloud and its queries.
+type CloudPlan = (Vec<u64>, Vec<(u64, QueryKind)>);
+
+/// A query: a frame, its truth, its cloud, and its nearest map frame.
+#[derive(Clone, Debug)]
+pub struct Query {
+    /// The frame number.
+    pub frame: u64,
+    /// Why it is a query.
+    pub kind: QueryKind,
+    /// Index of its cloud in [`Benchmark::clouds`].
+    pub cloud: usize,
+    /// `world_from_camera` of its colour picture.
+    pub truth: Isometry3,
+    /// The nearest frame of its cloud (by distance plus angle: 1° counts as 1 cm), its
+    /// pose, and its distance and angle to the truth.
+    pub nearest: (u64, Isometry3, f64, f64),
+}
+
+/// A benchmark ready to run: its clouds, queries and pictures.
+#[derive(Debug)]
+pub struct Benchmark {
+    /// The benchmark file.
+    pub spec: RealSpec,
+    /// The queries' camera (at the benchmark's resolution).
+    pub camera: Camera,
+    /// The clouds (one, or one per left-out frame).
+    pub clouds: Vec<PointCloud>,
+    /// The frames of each cloud.
+    pub cloud_frames: Vec<Vec<u64>>,
+    /// The queries.
+    pub queries: Vec<Query>,
+    /// Their pictures.
+    pub pictures: Vec<Image>,
+    /// With `[catadioptric]`: the camera and the queries' pictures resampled to it.
+    pub catadioptric: Option<(Camera, Vec<Image>)>,
+    /// The dataset.
+    pub dataset: rgbd::RgbdDataset,
+}
+
+/// One localisation of the benchmark.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunRecord {
+    /// The query's frame.
+    pub query: u64,
+    /// Why it is a query.
+    pub kind: QueryKind,
+    /// `pinhole` or the catadioptric camera (`ucm-xi0.9`).
+    pub camera: String,
+    /// Where it started (`truth`, `5cm-3deg`, `nearest-map-frame`).
+    pub start: String,
+    /// The start's distance and angle to the truth.
+    pub start_error_m: f64,
+    /// …degrees.
+    pub start_error_deg: f64,
+    /// The method (`localizer`, `rule2/convolved+region`, `global`, `reference`).
+    pub method: String,
+    /// Why it stopped.
+    pub stop: String,
+    /// Iterations (both steps).
+    pub iterations: usize,
+    /// Final distance to the truth, metres.
+    pub error_m: f64,
+    /// Final angle to the truth, degrees.
+    pub error_deg: f64,
+    /// Final distance to the query's photometric optimum (when computed), metres.
+    pub to_reference_m: Option<f64>,
+    /// …degrees.
+    pub to_reference_deg: Option<f64>,
+    /// Within the benchmark's thresholds of the truth and not diverged.
+    pub success: bool,
+    /// Time of the localisation, seconds.
+    pub time_s: f64,
+    /// The final `world_from_camera` as the paper's `(t, θw)`.
+    pub tx: f64,
+    /// …
+    pub ty: f64,
+    /// …
+    pub tz: f64,
+    /// …
+    pub wx: f64,
+    /// …
+    pub wy: f64,
+    /// …
+    pub wz: f64,
+}
+
+/// One tracked frame.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrackRecord {
+    /// The method.
+    pub method: String,
+    /// 1 frame in N.
+    pub frame_step: usize,
+    /// The frame.
+    pub frame: u64,
+    /// Distance of the estimate to the truth, metres.
+    pub error_m: f64,
+    /// Angle, degrees.
+    pub error_deg: f64,
+    /// Why the alignment stopped.
+    pub stop: String,
+    /// Its iterations.
+    pub iterations: usize,
+    /// Its time, seconds.
+    pub time_s: f64,
+    /// Whether the track was lost (diverged, or farther than the threshold) at or
+    /// before this frame.
+    pub lost: bool,
+}
+
+/// One localisation to run.
+#[derive(Clone, Debug)]
+struct Job {
+    query: usize,
+    catadioptric: bool,
+    start: String,
+    initial: Isometry3,
+    method: Option<BenchMethod>,
+    global: bool,
+    reference: bool,
+}
+
+/// A unit vector of a seeded direction.
+fn direction(rng: &mut splat::rng::SplitMix64) -> glam::DVec3 {
+    loop {
+        let v = glam::DVec3::new(rng.normal(), rng.normal(), rng.normal());
+        if v.length() > 1e-6 {
+            return v.normalize();
+        }
+    }
+}
+
+/// `truth · (t, θw)` with `|t| = translation_m`, `|θw| = rotation_deg`, directions
+/// drawn from `seed` and the query's frame.
+fn offset_start(
+    truth: &Isometry3,
+    [t, r]: [f64; 2],
+    seed: u64,
+    frame: u64,
+    index: usize,
+) -> Isometry3 {
+    let mut rng = splat::rng::SplitMix64::new(splat::rng::mix64(
+        seed ^ frame.wrapping_mul(0x9e37_79b9) ^ ((index as u64) << 48),
+    ));
+    let (a, b) = (
+        direction(&mut rng) * t,
+        direction(&mut rng) * r.to_radians(),
+    );
+    *truth * Isometry3::from_pose_vector([a.x, a.y, a.z, b.x, b.y, b.z]).expect("a finite offset")
+}
+
+/// The name of a start offset: `truth` or `5cm-3deg`.
+fn start_name([t, r]: [f64; 2]) -> String {
+    if t == 0.0 && r == 0.0 {
+        "truth".into()
+    } else {
+        format!("{}cm-{}deg", (t * 100.0).round(), r)
+    }
+}
+
+/// The catadioptric camera of `[catadioptric]`: the pinhole's size and centre, ξ, and the
+/// focal length that keeps the pinhole's scale at the centre (`α = f (1 + ξ)`), its
+/// region the pixels the pinhole sees.
+pub fn catadioptric_camera(pinhole: &Camera, xi: f64) -> anyhow::Result<Camera> {
+    let i = *pinhole.intrinsics();
+    let intrinsics = ucm::Intrinsics {
+        alpha_u: i.alpha_u * (1.0 + xi),
+        alpha_v: i.alpha_v * (1.0 + xi),
+        xi,
+        ..i
+    };
+    let full = Camera::new(
+        intrinsics,
+        None,
+        pinhole.width(),
+        pinhole.height(),
+        ucm::ValidRegion::Full,
+    )?;
+    Ok(frame::seen_through(&full, pinhole)?)
+}
+
+impl Benchmark {
+    /// Read the dataset under `data`, fuse the clouds, read the queries' pictures.
+    pub fn prepare(spec: RealSpec, data: &Path) -> anyhow::Result<Self> {
+        let dataset = rgbd::RgbdDataset::load(spec.resolve(&spec.dataset), data)
+            .with_context(|| format!("the dataset of benchmark {}", spec.name))?;
+        let full_camera = dataset.sensor().color_camera.clone();
+        let camera = if spec.downsample > 1 {
+            full_camera.downsampled(spec.downsample)?
+        } else {
+            full_camera.clone()
+        };
+        let parse = |text: &str| crate::parse_frames(text);
+        // (cloud frames, queries of that cloud).
+        let mut plan: Vec<CloudPlan> = Vec::new();
+        match &spec.split {
+            Split::LeaveOneOut { frames } => {
+                let frames = parse(frames)?;
+                ensure!(frames.len() >= 2, "leave one out needs two frames or more");
+                for &q in &frames {
+                    let others = frames.iter().copied().filter(|&f| f != q).collect();
+                    plan.push((others, vec![(q, QueryKind::LeftOut)]));
+                }
+            }
+            Split::Map {
+                map,
+                exclude,
+                near,
+                block,
+            } => {
+                let mut map = parse(map)?;
+                if let Some(exclude) = exclude {
+                    let exclude = parse(exclude)?;
+                    map.retain(|f| !exclude.contains(f));
+                }
+                let mut queries: Vec<(u64, QueryKind)> = parse(near)?
+                    .into_iter()
+                    .map(|f| (f, QueryKind::Near))
+                    .collect();
+                if let Some(block) = block {
+                    queries.extend(parse(block)?.into_iter().map(|f| (f, QueryKind::Block)));
+                }
+                for (q, _) in &queries {
+                    ensure!(!map.contains(q), "query frame {q} is a map frame");
+                }
+                plan.push((map, queries));
+            }
+        }
+        let mut clouds = Vec::with_capacity(plan.len());
+        let mut cloud_frames = Vec::with_capacity(plan.len());
+        let mut queries = Vec::new();
+        for (index, (frames, cloud_queries)) in plan.into_iter().enumerate() {
+            eprintln!(
+                "fusing {} frames into cloud {} of {}",
+                frames.len(),
+                index + 1,
+                clouds.capacity()
+            );
+            let progress = Progress::new(frames.len() as u64, "frames");
+            let (cloud, report) = dataset.fuse(&frames, spec.fuse, |_, _| progress.inc(1, ""))?;
+            progress.finish();
+            eprintln!("{} points ({} voxels)", report.points, report.voxels);
+            for (frame, kind) in cloud_queries {
+                let truth = dataset.world_from_color(frame)?;
+                let nearest = frames
+                    .iter()
+                    .map(|&f| {
+                        let pose = dataset.world_from_color(f)?;
+                        let (t, r) = pose.distance_to(&truth);
+                        Ok((f, pose, t, r.to_degrees()))
+                    })
+                    .collect::<anyhow::Result<Vec<_>>>()?
+                    .into_iter()
+                    .min_by(|a, b| (a.2 + a.3 / 100.0).total_cmp(&(b.2 + b.3 / 100.0)))
+                    .context("a cloud without frames")?;
+                queries.push(Query {
+                    frame,
+                    kind,
+                    cloud: index,
+                    truth,
+                    nearest,
+                });
+            }
+            clouds.push(cloud);
+            cloud_frames.push(frames);
+        }
+        let pictures = queries
+            .par_iter()
+            .map(|q| load_picture(&dataset, q.frame, &full_camera, &camera, spec.downsample))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let catadioptric = match &spec.catadioptric {
+            None => None,
+            Some(c) => {
+                let ucm = catadioptric_camera(&camera, c.xi)?;
+                let resampled = pictures
+                    .iter()
+                    .map(|p| p.resampled(&camera, &ucm))
+                    .collect::<Result<Vec<_>, _>>()?;
+                Some((ucm, resampled))
+            }
+        };
+        Ok(Self {
+            spec,
+            camera,
+            clouds,
+            cloud_frames,
+            queries,
+            pictures,
+            catadioptric,
+            dataset,
+        })
+    }
+
+    fn jobs(&self) -> anyhow::Result<Vec<Job>> {
+        let spec = &self.spec;
+        let methods = spec.methods()?;
+        let mut jobs = Vec::new();
+        let cameras: &[bool] = if spec.catadioptric.is_some() {
+            &[false, true]
+        } else {
+            &[false]
+        };
+        for &catadioptric in cameras {
+            let methods = if catadioptric {
+                let c = spec.catadioptric.as_ref().expect("catadioptric settings");
+                c.methods
+                    .iter()
+                    .map(|m| BenchMethod::parse(m))
+                    .collect::<anyhow::Result<Vec<_>>>()?
+            } else {
+                methods.clone()
+            };
+            for (qi, q) in self.queries.iter().enumerate() {
+                if spec.reference {
+                    jobs.push(Job {
+                        query: qi,
+                        catadioptric,
+                        start: "truth".into(),
+                        initial: q.truth,
+                        method: None,
+                        global: false,
+                        reference: true,
+                    });
+                }
+                let mut starts: Vec<(String, Isometry3)> = spec
+                    .starts
+                    .offsets
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &o)| {
+                        (
+                            start_name(o),
+                            offset_start(&q.truth, o, spec.starts.seed, q.frame, i),
+                        )
+                    })
+                    .collect();
+                if spec.starts.nearest_map_frame && q.kind == QueryKind::Block {
+                    starts.push(("nearest-map-frame".into(), q.nearest.1));
+                }
+                for (name, initial) in &starts {
+                    for m in &methods {
+                        jobs.push(Job {
+                            query: qi,
+                            catadioptric,
+                            start: name.clone(),
+                            initial: *initial,
+                            method: Some(*m),
+                            global: false,
+                            reference: false,
+                        });
+                    }
+                }
+                if spec.global.is_some() && !catadioptric {
+                    let has_block = self.queries.iter().any(|q| q.kind == QueryKind::Block);
+                    let global_start = if has_block {
+                        (q.kind == QueryKind::Block)
+                            .then(|| ("nearest-map-frame".to_string(), q.nearest.1))
+                    } else {
+                        starts.iter().rev().find(|(n, _)| n != "truth").cloned()
+                    };
+                    if let Some((name, initial)) = global_start {
+                        jobs.push(Job {
+                            query: qi,
+                            catadioptric,
+                            start: name,
+                            initial,
+                            method: None,
+                            global: true,
+                            reference: false,
+                        });
+                    }
+                }
+            }
+        }
+        Ok(jobs)
+    }
+
+    fn run_job(&self, job: &Job) -> anyhow::Result<(Outcome, String)> {
+        let q = &self.queries[job.query];
+        let cloud = &self.clouds[q.cloud];
+        let (camera, picture) = match (&self.catadioptric, job.catadioptric) {
+            (Some((camera, pictures)), true) => (camera, &pictures[job.query]),
+            _ => (&self.camera, &self.pictures[job.query]),
+        };
+        if job.reference {
+            // The paper's gain and no damping: small steps down to the optimum.
+            let config = VvsConfig {
+                stall_window: 0,
+                max_iterations: 400,
+                gain: 0.2,
+                levenberg_marquardt: None,
+                ..BenchMethod::parse("povs")?.config()
+            };
+            let outcome =
+                Servo::new(cloud, camera, config)?.run(Method::Povs, picture, job.initial)?;
+            return Ok((outcome, "reference".into()));
+        }
+        if job.global {
+            let settings = self.spec.global.as_ref().expect("global settings");
+            let mut config = BenchMethod::parse("localizer")?.config();
+            config.global.grid_spacing_m = settings.grid_spacing_m;
+            let outcome = Servo::new(cloud, camera, config)?.localize_in_box(
+                picture,
+                job.initial,
+                &settings.prior,
+            )?;
+            return Ok((outcome, "global".into()));
+        }
+        let method = job.method.expect("a method");
+        let outcome =
+            Servo::new(cloud, camera, method.config())?.run(method.method, picture, job.initial)?;
+        Ok((outcome, method.name()))
+    }
+
+    /// Every localisation of the benchmark, with progress; records in job order.
+    pub fn localize(&self) -> anyhow::Result<Vec<RunRecord>> {
+        let jobs = self.jobs()?;
+        let progress = Progress::new(jobs.len() as u64, "localisations");
+        let outcomes = jobs
+            .par_iter()
+            .map(|job| {
+                let result = self.run_job(job);
+                progress.inc(1, "");
+                result
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        progress.finish();
+        let ucm_name = self
+            .spec
+            .catadioptric
+            .as_ref()
+            .map(|c| format!("ucm-xi{}", c.xi))
+            .unwrap_or_default();
+        let mut records: Vec<RunRecord> = jobs
+            .iter()
+            .zip(outcomes)
+            .map(|(job, (outcome, method))| {
+                let q = &self.queries[job.query];
+                let (start_m, start_rad) = job.initial.distance_to(&q.truth);
+                let (error_m, error_rad) = outcome.world_from_camera.distance_to(&q.truth);
+                let diverged = matches!(outcome.stop, StopReason::Diverged(_));
+                let r = outcome.world_from_camera.to_pose_vector();
+                RunRecord {
+                    query: q.frame,
+                    kind: q.kind,
+                    camera: if job.catadioptric {
+                        ucm_name.clone()
+                    } else {
+                        "pinhole".into()
+                    },
+                    start: job.start.clone(),
+                    start_error_m: start_m,
+                    start_error_deg: start_rad.to_degrees(),
+                    method,
+                    stop: outcome.stop.to_string(),
+                    iterations: outcome.iterations[0] + outcome.iterations[1],
+                    error_m,
+                    error_deg: error_rad.to_degrees(),
+                    to_reference_m: None,
+                    to_reference_deg: None,
+                    success: !diverged
+                        && error_m < self.spec.success_m
+                        && error_rad.to_degrees() < self.spec.success_deg,
+                    time_s: outcome.time_s,
+                    tx: r[0],
+                    ty: r[1],
+                    tz: r[2],
+                    wx: r[3],
+                    wy: r[4],
+                    wz: r[5],
+                }
+            })
+            .collect();
+        // Distances to each query's reference (its photometric optimum).
+        let references: Vec<(u64, String, Isometry3)> = records
+            .iter()
+            .filter(|r| r.method == "reference")
+            .map(|r| {
+                let pose = Isometry3::from_pose_vector([r.tx, r.ty, r.tz, r.wx, r.wy, r.wz])?;
+                Ok((r.query, r.camera.clone(), pose))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        for record in &mut records {
+            if let Some((_, _, reference)) = references
+                .iter()
+                .find(|(q, c, _)| *q == record.query && *c == record.camera)
+            {
+                let pose = Isometry3::from_pose_vector([
+                    record.tx, record.ty, record.tz, record.wx, record.wy, record.wz,
+                ])?;
+                let (m, rad) = pose.distance_to(reference);
+                record.to_reference_m = Some(m);
+                record.to_reference_deg = Some(rad.to_degrees());
+            }
+        }
+        Ok(records)
+    }
+
+    /// Every track of `[tracking]`, frame after frame, with progress.
+    pub fn track(&self) -> anyhow::Result<Vec<TrackRecord>> {
+        let Some(spec) = &self.spec.tracking else {
+            return Ok(Vec::new());
+        };
+        let frames = crate::parse_frames(&spec.frames)?;
+        ensure!(
+            self.clouds.len() == 1,
+            "tracking needs one map cloud (split kind = \"map\")"
+        );
+        let map = &self.cloud_frames[0];
+        ensure!(
+            frames.iter().all(|f| !map.contains(f)),
+            "tracked frames must be held out of the map"
+        );
+        let full_camera = self.dataset.sensor().color_camera.clone();
+        let pictures = frames
+            .par_iter()
+            .map(|&f| {
+                load_picture(
+                    &self.dataset,
+                    f,
+                    &full_camera,
+                    &self.camera,
+                    self.spec.downsample,
+                )
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let truths = frames
+            .iter()
+            .map(|&f| Ok(self.dataset.world_from_color(f)?))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let tracks: Vec<(BenchMethod, usize)> = spec
+            .methods
+            .iter()
+            .map(|m| BenchMethod::parse(m))
+            .collect::<anyhow::Result<Vec<_>>>()?
+            .into_iter()
+            .flat_map(|m| spec.frame_steps.iter().map(move |&n| (m, n)))
+            .collect();
+        let total: usize = tracks.iter().map(|(_, n)| frames.len().div_ceil(*n)).sum();
+        let progress = Progress::new(total as u64, "tracked frames");
+        let results = tracks
+            .par_iter()
+            .map(|&(method, step)| {
+                let servo = Servo::new(&self.clouds[0], &self.camera, method.config())?;
+                let mut tracker = Tracker::new(servo, method.method, truths[0])?;
+                let mut records = Vec::new();
+                let mut lost = false;
+                for k in (0..frames.len()).step_by(step) {
+                    let started = Instant::now();
+                    let outcome = tracker.align(&pictures[k])?;
+                    let (m, rad) = tracker.estimate().distance_to(&truths[k]);
+                    lost |= tracker.is_lost() || m > spec.lost_threshold_m;
+                    records.push(TrackRecord {
+                        method: method.name(),
+                        frame_step: step,
+                        frame: frames[k],
+                        error_m: m,
+                        error_deg: rad.to_degrees(),
+                        stop: outcome.stop.to_string(),
+                        iterations: outcome.iterations[0] + outcome.iterations[1],
+                        time_s: started.elapsed().as_secs_f64(),
+                        lost,
+                    });
+                    progress.inc(1, "");
+                }
+                Ok(records)
+            })
+            .collect::<anyhow::Result<Vec<Vec<TrackRecord>>>>()?;
+        progress.finish();
+        Ok(results.into_iter().flatten().collect())
+    }
+}
+
+/// A query's picture at the benchmark's resolution.
+fn load_picture(
+    dataset: &rgbd::RgbdDataset,
+    frame: u64,
+    full_camera: &Camera,
+    camera: &Camera,
+    downsample: u32,
+) -> anyhow::Result<Image> {
+    let picture = Image::load(dataset.color_path(frame)?, full_camera, None)?;
+    Ok(if downsample > 1 {
+        picture.downsampled(downsample, camera)?
+    } else {
+        picture
+    })
+}
+
+/// Prepare and run a benchmark: its localisations and its tracks.
+pub fn run_benchmark(
+    spec: RealSpec,
+    data: &Path,
+) -> anyhow::Result<(Benchmark, Vec<RunRecord>, Vec<TrackRecord>)> {
+    let benchmark = Benchmark::prepare(spec, data)?;
+    let records = benchmark.localize()?;
+    let tracks = benchmark.track()?;
+    Ok((benchmark, records, tracks))
+}
