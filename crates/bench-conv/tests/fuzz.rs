@@ -269,4 +269,57 @@ proptest! {
         std::fs::remove_file(&path).unwrap();
         std::fs::remove_file(&valid).unwrap();
     }
+
+    /// RGB-D dataset descriptions, their pose files (TUM lines, 4×4 matrices), 16-bit
+    /// depth pictures, and real-data benchmark files: read, never fused.
+    #[test]
+    fn rgbd_datasets_poses_depth_and_benchmarks(seed in any::<u64>(), which in 0usize..5) {
+        let dir = temp("rgbd");
+        let real = root().join("fixtures/real");
+        for name in ["house-camera.toml", "house-mask.png", "kinect-7scenes-color.toml", "kinect-7scenes-depth.toml", "house.toml", "redkitchen.toml"] {
+            let _ = std::fs::copy(real.join(name), dir.join(name));
+        }
+        let data = dir.join(format!("data-{seed}"));
+        std::fs::create_dir_all(&data).unwrap();
+        let lines = "-0.2289 0.0064 0.0287 -0.0004 -0.1131 -0.0326 0.9930\n".repeat(5);
+        let matrix = "0.909 0.272 -0.314 -0.340\n-0.272 0.961 0.045 0.016\n0.314 0.044 0.948 0.296\n0 0 0 1\n";
+        match which {
+            0 => {
+                std::fs::write(data.join("pose.txt"), mutate_text(&lines, seed)).unwrap();
+                let _ = rgbd::RgbdDataset::load(dir.join("house.toml"), &data);
+            }
+            1 => {
+                std::fs::write(data.join("frame-000000.pose.txt"), mutate_text(matrix, seed)).unwrap();
+                let description = std::fs::read_to_string(dir.join("redkitchen.toml"))
+                    .unwrap()
+                    .replace("frames = [0, 999]", "frames = [0, 0]");
+                std::fs::write(dir.join("one.toml"), description).unwrap();
+                let _ = rgbd::RgbdDataset::load(dir.join("one.toml"), &data);
+            }
+            2 => {
+                let text = std::fs::read_to_string(dir.join("redkitchen.toml")).unwrap();
+                std::fs::write(dir.join("m.toml"), mutate_text(&text, seed)).unwrap();
+                let _ = rgbd::RgbdDataset::load(dir.join("m.toml"), &data);
+            }
+            3 => {
+                let path = data.join("d.png");
+                image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(64, 48, |i, j| image::Luma([(i * 300 + j) as u16]))
+                    .save(&path)
+                    .unwrap();
+                let bytes = std::fs::read(&path).unwrap();
+                std::fs::write(&path, mutate_bytes(&bytes, seed)).unwrap();
+                let _ = rgbd::DepthImage::load(&path, 0.001, &[65535]);
+            }
+            _ => {
+                for name in ["bench-house.toml", "bench-redkitchen.toml"] {
+                    let text = std::fs::read_to_string(real.join(name)).unwrap();
+                    let path = dir.join(format!("m-{seed}-{name}"));
+                    std::fs::write(&path, mutate_text(&text, seed)).unwrap();
+                    let _ = bench_conv::real::RealSpec::load(&path);
+                    std::fs::remove_file(&path).unwrap();
+                }
+            }
+        }
+        let _ = std::fs::remove_dir_all(&data);
+    }
 }

@@ -738,3 +738,29 @@ fn merges_know_whether_they_are_complete() {
     assert_eq!(read_manifest(&dir.join("runs.csv")).unwrap(), shard(2, 3));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Frame lists of `bench-conv fuse` and the real benchmarks: numbers and inclusive
+/// ranges, stepped, in the order given, without repeats; anything else refused.
+#[test]
+fn frame_lists() {
+    use bench_conv::parse_frames;
+    assert_eq!(parse_frames("1-5").unwrap(), [1, 2, 3, 4, 5]);
+    assert_eq!(parse_frames("0-30/10, 7, 10").unwrap(), [0, 10, 20, 30, 7]);
+    assert_eq!(
+        parse_frames("460-510/10").unwrap(),
+        [460, 470, 480, 490, 500, 510]
+    );
+    for bad in [
+        "",
+        "5-1",
+        "a",
+        "1-",
+        "-3",
+        "0-9/0",
+        "0-9/x",
+        "1.5",
+        "0-99999999999",
+    ] {
+        assert!(parse_frames(bad).is_err(), "{bad}");
+    }
+}

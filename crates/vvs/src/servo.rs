@@ -644,8 +644,12 @@ impl<'a> Servo<'a> {
                     sum += w * e * e;
                     count += w;
                 }
+                // As in a stage: divided by the fraction of the picture compared.
+                let compared = support.iter().filter(|&&s| s).count() as f64;
+                let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
+                let coverage = (compared / observed).max(1e-3);
                 *cost = if count > 0.0 {
-                    sum / count
+                    sum / count / coverage
                 } else {
                     f64::INFINITY
                 };
@@ -890,6 +894,8 @@ impl<'a> Servo<'a> {
         };
         let valid_count = camera.valid_pixel_count().max(1) as f64;
         let mut initial_cost = None;
+        // On the common support: the fraction of the picture's observed pixels compared.
+        let mut coverage = 1.0f64;
         let mut cost = f64::NAN;
         self.costs.clear();
         for iteration in 0..budget {
@@ -953,6 +959,9 @@ impl<'a> Servo<'a> {
                         0.0
                     };
                 }
+                let compared = support.iter().filter(|&&s| s).count();
+                let observed = against_observed.iter().filter(|&&o| o).count();
+                coverage = compared as f64 / observed.max(1) as f64;
                 let view = Restricted::new(input, support)?;
                 let against = Against {
                     intensity: against,
@@ -1024,7 +1033,11 @@ impl<'a> Servo<'a> {
                 weight_sum += f64::from(w);
                 weighted += f64::from(w) * f64::from(e) * f64::from(e);
             }
-            cost = weighted / weight_sum.max(1.0);
+            // On the common support the residuals are of pictures normalised over the
+            // pixels compared, whatever their number: the cost is divided by the
+            // fraction of the picture they cover, so that a pose that sees little of the
+            // cloud does not look good for it (costs are compared between poses).
+            cost = weighted / weight_sum.max(1.0) / coverage.max(1e-3);
             if !cost.is_finite() {
                 return Ok(StageResult {
                     stop: StopReason::Diverged(Divergence::NotFinite),

@@ -78,6 +78,7 @@ fn the_localizer_compares_on_the_common_support() {
     assert_eq!(localizer.method, Method::Rule2);
     assert_eq!(localizer.config.gain, 1.0);
     assert_eq!(localizer.config.levenberg_marquardt, Some(0.1));
+    assert_eq!(localizer.config.lambda_schedule, [7.5, 3.0]);
     // The paper's settings stay the optimiser's defaults.
     assert_eq!(VvsConfig::default().support, Support::Region);
 }

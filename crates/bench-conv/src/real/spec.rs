@@ -120,13 +120,14 @@ pub struct TrackingSpec {
     pub frame_steps: Vec<usize>,
     /// Methods (PoT: `povs`; PGMoT: `localizer` or a PGM rule).
     pub methods: Vec<String>,
-    /// A frame farther than this from the truth is lost, metres.
+    /// A frame farther than this from the truth is lost, metres (default 0.5, as the
+    /// synthetic tracking's).
     #[serde(default = "lost_m")]
     pub lost_threshold_m: f64,
 }
 
 fn lost_m() -> f64 {
-    0.2
+    0.5
 }
 
 /// The queries resampled to a unified-central-model camera of the same pose.
