@@ -546,79 +546,108 @@ pub fn plot_cdf(
     png: &Path,
     svg: &Path,
 ) -> anyhow::Result<()> {
+    let summaries = summarize(records);
+    let series: Vec<(String, Vec<f64>)> = summaries
+        .iter()
+        .map(|m| {
+            let errors: Vec<f64> = records
+                .iter()
+                .filter(|r| r.config == m.config)
+                .map(|r| r.final_position_error_m)
+                .collect();
+            // One decimal, so that 3 and 5 successes of 448 (0.7 and 1.1 %) read apart.
+            let label = format!(
+                "{} ({:.1} %, {}/{})",
+                m.config,
+                100.0 * m.successes as f64 / errors.len().max(1) as f64,
+                m.successes,
+                errors.len()
+            );
+            (label, errors)
+        })
+        .collect();
+    plot_error_cdf(
+        "Cumulative distribution of final position errors",
+        [1e-4, 100.0],
+        &series,
+        threshold_m,
+        png,
+        svg,
+    )
+}
+
+/// The cumulative distribution of each series' errors (label, final position errors
+/// in metres, clamped to `range_m`), on a log scale, with a line at `threshold_m`;
+/// written as PNG and SVG.
+pub(crate) fn plot_error_cdf(
+    title: &str,
+    range_m: [f64; 2],
+    series: &[(String, Vec<f64>)],
+    threshold_m: f64,
+    png: &Path,
+    svg: &Path,
+) -> anyhow::Result<()> {
     use plotters::prelude::*;
     crate::register_font();
-    draw_cdf(
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        title: &str,
+        [lo, hi]: [f64; 2],
+        series: &[(String, Vec<f64>)],
+        threshold_m: f64,
+    ) -> anyhow::Result<()> {
+        root.fill(&WHITE).map_err(crate::plot::error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d((lo..hi).log_scale(), 0.0f64..100.0)
+            .map_err(crate::plot::error)?;
+        chart
+            .configure_mesh()
+            .x_desc("final position error (m)")
+            .y_desc("runs (%)")
+            .draw()
+            .map_err(crate::plot::error)?;
+        crate::plot::line(
+            &mut chart,
+            vec![(threshold_m, 0.0), (threshold_m, 100.0)],
+            format!("{:.0} cm threshold", threshold_m * 100.0),
+            BLACK.stroke_width(1),
+        )?;
+        for (i, (label, errors)) in series.iter().enumerate() {
+            let mut errors: Vec<f64> = errors.iter().map(|e| e.clamp(lo, hi)).collect();
+            errors.sort_by(f64::total_cmp);
+            let n = errors.len() as f64;
+            let mut points = vec![(lo, 0.0)];
+            for (k, e) in errors.iter().enumerate() {
+                points.push((*e, 100.0 * k as f64 / n));
+                points.push((*e, 100.0 * (k + 1) as f64 / n));
+            }
+            points.push((hi, 100.0));
+            let color = Palette99::pick(i).to_rgba();
+            crate::plot::line(&mut chart, points, label.clone(), color.stroke_width(2))?;
+        }
+        crate::plot::finish(&mut chart, &root)
+    }
+    let range = [range_m[0], range_m[1]];
+    draw(
         BitMapBackend::new(png, (900, 600)).into_drawing_area(),
-        records,
+        title,
+        range,
+        series,
         threshold_m,
     )
     .with_context(|| format!("plotting {}", png.display()))?;
-    draw_cdf(
+    draw(
         SVGBackend::new(svg, (900, 600)).into_drawing_area(),
-        records,
+        title,
+        range,
+        series,
         threshold_m,
     )
-    .with_context(|| format!("plotting {}", svg.display()))?;
-    Ok(())
-}
-
-fn draw_cdf<DB: plotters::prelude::DrawingBackend>(
-    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
-    records: &[RunRecord],
-    threshold_m: f64,
-) -> anyhow::Result<()> {
-    use plotters::prelude::*;
-    let summaries = summarize(records);
-    root.fill(&WHITE).map_err(crate::plot::error)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Cumulative distribution of final position errors",
-            ("sans-serif", 20),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d((1e-4f64..100.0f64).log_scale(), 0.0f64..100.0)
-        .map_err(crate::plot::error)?;
-    chart
-        .configure_mesh()
-        .x_desc("final position error (m)")
-        .y_desc("runs (%)")
-        .draw()
-        .map_err(crate::plot::error)?;
-    crate::plot::line(
-        &mut chart,
-        vec![(threshold_m, 0.0), (threshold_m, 100.0)],
-        format!("{:.0} cm threshold", threshold_m * 100.0),
-        BLACK.stroke_width(1),
-    )?;
-    for (i, m) in summaries.iter().enumerate() {
-        let mut errors: Vec<f64> = records
-            .iter()
-            .filter(|r| r.config == m.config)
-            .map(|r| r.final_position_error_m.clamp(1e-4, 100.0))
-            .collect();
-        errors.sort_by(f64::total_cmp);
-        let n = errors.len() as f64;
-        let mut points = vec![(1e-4, 0.0)];
-        for (k, e) in errors.iter().enumerate() {
-            points.push((*e, 100.0 * k as f64 / n));
-            points.push((*e, 100.0 * (k + 1) as f64 / n));
-        }
-        points.push((100.0, 100.0));
-        let color = Palette99::pick(i).to_rgba();
-        // One decimal, so that 3 and 5 successes of 448 (0.7 and 1.1 %) read apart.
-        let label = format!(
-            "{} ({:.1} %, {}/{})",
-            m.config,
-            100.0 * m.successes as f64 / n.max(1.0),
-            m.successes,
-            errors.len()
-        );
-        crate::plot::line(&mut chart, points, label, color.stroke_width(2))?;
-    }
-    crate::plot::finish(&mut chart, &root)
+    .with_context(|| format!("plotting {}", svg.display()))
 }
 
 /// The success of one method at one offset scale: a point of the domain curve.

@@ -256,18 +256,7 @@ impl Brightness {
                 self.inverse_range[k] = if count > 0 { sum / count as f32 } else { 0.0 };
             }
         }
-        let mut first = 0;
-        for &[start, end] in &self.valid_runs {
-            let (run, n) = (start as usize..end as usize, (end - start) as usize);
-            photometric::rows(photometric::Run {
-                u: &self.factors_u[first..first + n],
-                v: &self.factors_v[first..first + n],
-                gradient: &self.gradient[run.clone()],
-                inverse_range: &self.inverse_range[run.clone()],
-                out: &mut self.pixel_interaction[run],
-            });
-            first += n;
-        }
+        self.rows();
     }
 
     /// The body of [`Brightness::compute_pixels`], once the size is checked.
@@ -323,18 +312,7 @@ impl Brightness {
         // start, and only the region is written.
         self.gradient_plan
             .compute(&self.image, valid, &mut self.gradient);
-        let mut first = 0;
-        for &[start, end] in &self.valid_runs {
-            let (run, n) = (start as usize..end as usize, (end - start) as usize);
-            photometric::rows(photometric::Run {
-                u: &self.factors_u[first..first + n],
-                v: &self.factors_v[first..first + n],
-                gradient: &self.gradient[run.clone()],
-                inverse_range: &self.inverse_range[run.clone()],
-                out: &mut self.pixel_interaction[run],
-            });
-            first += n;
-        }
+        self.rows();
     }
 
     /// [`Brightness::pixels`] for a picture that does not hold an intensity at every
@@ -374,6 +352,13 @@ impl Brightness {
                 self.gradient[k as usize] = [0.0; 2];
             }
         }
+        self.rows();
+    }
+
+    /// Every valid pixel's interaction row from [`Brightness::gradient`] and
+    /// [`Brightness::inverse_range`], run by run.
+    #[inline(always)]
+    fn rows(&mut self) {
         let mut first = 0;
         for &[start, end] in &self.valid_runs {
             let (run, n) = (start as usize..end as usize, (end - start) as usize);

@@ -57,25 +57,7 @@ proptest! {
 
 #[test]
 fn feature_rows_are_the_photometric_rows_of_the_grid() {
-    let camera = Camera::new(
-        Intrinsics {
-            alpha_u: 30.0,
-            alpha_v: 30.0,
-            u0: 31.5,
-            v0: 23.5,
-            xi: 0.9,
-            skew: 0.0,
-        },
-        None,
-        64,
-        48,
-        ValidRegion::Annulus(ucm::Annulus {
-            center_px: [31.5, 23.5],
-            inner_radius_px: 5.0,
-            outer_radius_px: 22.0,
-        }),
-    )
-    .unwrap();
+    let camera = annulus_camera();
     let mut frame = Frame::for_camera(&camera);
     for k in 0..frame.intensity.len() {
         frame.intensity[k] = ((k % 64) as f32 * 0.3).sin() + ((k / 64) as f32 * 0.2).cos();
@@ -112,10 +94,9 @@ fn feature_rows_are_the_photometric_rows_of_the_grid() {
     assert!(feature.compute(&Frame::new(3, 3)).is_err());
 }
 
-/// A 64×48 catadioptric camera with an annulus, and a smooth frame on it whose hits
-/// leave holes (every pixel of a disc and of a band is sky).
-fn holed_scene() -> (Camera, Frame) {
-    let camera = Camera::new(
+/// A 64×48 catadioptric camera with an annulus.
+fn annulus_camera() -> Camera {
+    Camera::new(
         Intrinsics {
             alpha_u: 30.0,
             alpha_v: 30.0,
@@ -133,7 +114,13 @@ fn holed_scene() -> (Camera, Frame) {
             outer_radius_px: 22.0,
         }),
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// The annulus camera and a smooth frame on it whose hits leave holes (every pixel of a
+/// disc and of a band is sky).
+fn holed_scene() -> (Camera, Frame) {
+    let camera = annulus_camera();
     let mut frame = Frame::for_camera(&camera);
     for k in 0..frame.intensity.len() {
         let (x, y) = ((k % 64) as f32, (k / 64) as f32);

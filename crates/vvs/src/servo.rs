@@ -72,6 +72,18 @@ struct Level {
     against_observed: Vec<bool>,
 }
 
+/// The PGM's options of `config`, its brightness normalised or not.
+fn pgm_options(config: &VvsConfig, normalize: bool) -> PgmOptions {
+    PgmOptions {
+        stride: config.pgm_stride,
+        normalize,
+        parallel: config.parallel,
+        recursive_from_lambda: config.pgm_recursive(),
+        interaction_row_step_lambdas: config.pgm_interaction_row_step(),
+        ..PgmOptions::default()
+    }
+}
+
 impl Level {
     fn new(camera: Camera, config: &VvsConfig) -> Result<Self, VvsError> {
         let options = RenderOptions {
@@ -82,43 +94,13 @@ impl Level {
         Ok(Self {
             renderer: Renderer::new(camera.clone(), options)?,
             frame: Frame::for_camera(&camera),
-            pgm: Pgm::new(
-                &camera,
-                PgmOptions {
-                    stride: config.pgm_stride,
-                    normalize: config.normalize,
-                    parallel: config.parallel,
-                    recursive_from_lambda: config.pgm_recursive(),
-                    interaction_row_step_lambdas: config.pgm_interaction_row_step(),
-                    ..PgmOptions::default()
-                },
-            )?,
+            pgm: Pgm::new(&camera, pgm_options(config, config.normalize))?,
             brightness: Brightness::new(&camera).with_normalization(config.normalize),
             vignetting: RadialVignetting::new(&camera),
             corrected: Frame::for_camera(&camera),
             derivative: Image::new(camera.width(), camera.height()),
-            derivative_pgm: Pgm::new(
-                &camera,
-                PgmOptions {
-                    stride: config.pgm_stride,
-                    normalize: false,
-                    parallel: config.parallel,
-                    recursive_from_lambda: config.pgm_recursive(),
-                    interaction_row_step_lambdas: config.pgm_interaction_row_step(),
-                    ..PgmOptions::default()
-                },
-            )?,
-            desired_pgm: Pgm::new(
-                &camera,
-                PgmOptions {
-                    stride: config.pgm_stride,
-                    normalize: config.normalize,
-                    parallel: config.parallel,
-                    recursive_from_lambda: config.pgm_recursive(),
-                    interaction_row_step_lambdas: config.pgm_interaction_row_step(),
-                    ..PgmOptions::default()
-                },
-            )?,
+            derivative_pgm: Pgm::new(&camera, pgm_options(config, false))?,
+            desired_pgm: Pgm::new(&camera, pgm_options(config, config.normalize))?,
             desired_brightness: Brightness::new(&camera).with_normalization(config.normalize),
             support: vec![false; camera.pixel_count()],
             against: vec![0.0; camera.pixel_count()],
@@ -461,6 +443,7 @@ impl<'a> Servo<'a> {
         let mut screened: Vec<(f64, usize, usize)> =
             Vec::with_capacity(nodes.len() * orientations.len());
         let mut costs = vec![f64::INFINITY; orientations.len()];
+        let identity = orientations.iter().position(|o| *o == [0.0; 3]);
         for index in 0..nodes.len() {
             self.search_cost(search, &node_pose(index, 0), lambda, &mut costs)?;
             for (orientation, &cost) in costs.iter().enumerate() {
@@ -502,8 +485,18 @@ impl<'a> Servo<'a> {
                 &mut history,
             )?;
             descent_iterations += result.iterations;
-            if !matches!(result.stop, StopReason::Diverged(_)) && result.cost.is_finite() {
-                descended.push((result.cost, (index, orientation), pose));
+            // On the common support the descents are ranked by the screening's score
+            // at their end (the unturned picture), not by their costs: those compare
+            // pictures normalised over supports of different shapes.
+            let rank = match (common, identity) {
+                (true, Some(identity)) => {
+                    self.search_cost(search, &pose, lambda, &mut costs)?;
+                    costs[identity]
+                }
+                _ => result.cost,
+            };
+            if !matches!(result.stop, StopReason::Diverged(_)) && rank.is_finite() {
+                descended.push((rank, (index, orientation), pose));
             }
         }
         descended.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -637,19 +630,29 @@ impl<'a> Servo<'a> {
                 self.scratch.clear();
                 self.scratch.extend_from_slice(g);
                 let g_star = desired_pgm.transform(&Restricted::new(picture, support)?, lambda)?;
-                let (mut sum, mut count) = (0.0f64, 0.0f64);
+                // The two PGMs' correlation over the compared samples (scale-free, where
+                // the mean squared difference depends on the support's shape), its
+                // shortfall divided by the fraction of the picture compared.
+                let (mut w_sum, mut a_sum, mut b_sum) = (0.0f64, 0.0f64, 0.0f64);
+                let (mut aa, mut bb, mut ab) = (0.0f64, 0.0f64, 0.0f64);
                 for (k, (&a, &b)) in self.scratch.iter().zip(g_star).enumerate() {
                     let w = if masked { f64::from(weights[k]) } else { 1.0 };
-                    let e = f64::from(a - b);
-                    sum += w * e * e;
-                    count += w;
+                    let (a, b) = (f64::from(a), f64::from(b));
+                    w_sum += w;
+                    a_sum += w * a;
+                    b_sum += w * b;
+                    aa += w * a * a;
+                    bb += w * b * b;
+                    ab += w * a * b;
                 }
-                // As in a stage: divided by the fraction of the picture compared.
                 let compared = support.iter().filter(|&&s| s).count() as f64;
                 let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
-                let coverage = (compared / observed).max(1e-3);
-                *cost = if count > 0.0 {
-                    sum / count / coverage
+                let coverage = compared / observed;
+                *cost = if w_sum > 0.0 && coverage > 0.0 {
+                    let (ma, mb) = (a_sum / w_sum, b_sum / w_sum);
+                    let (va, vb) = (aa / w_sum - ma * ma, bb / w_sum - mb * mb);
+                    let correlation = (ab / w_sum - ma * mb) / (va * vb).sqrt().max(1e-30);
+                    (1.0 - correlation) / coverage
                 } else {
                     f64::INFINITY
                 };

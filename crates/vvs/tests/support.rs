@@ -82,3 +82,33 @@ fn the_localizer_compares_on_the_common_support() {
     // The paper's settings stay the optimiser's defaults.
     assert_eq!(VvsConfig::default().support, Support::Region);
 }
+
+/// The global search with the localiser's settings (common support, its candidates
+/// ranked by the correlation of the two PGMs over the compared pixels divided by the
+/// fraction compared): from the corner of the paper's box, in the city with holes, it
+/// finds the picture's pose.
+#[test]
+fn the_global_search_on_the_common_support_finds_the_pose_in_a_cloud_with_holes() {
+    let camera = fixture();
+    let desired = Servo::new(&city().cloud, &camera, VvsConfig::default())
+        .unwrap()
+        .render(&desired_pose())
+        .unwrap();
+    let holed = holed_city();
+    let degree = std::f64::consts::PI / 180.0;
+    let start = offset([8.0, 2.0, 1.5, 10.0 * degree, 10.0 * degree, 15.0 * degree]);
+    let config = VvsConfig {
+        keep_history: false,
+        ..Localizer::default().config
+    };
+    let outcome = Servo::new(&holed, &camera, config)
+        .unwrap()
+        .run(Method::Global, &desired, start)
+        .unwrap();
+    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
+    assert!(
+        dt < 0.05 && dr.to_degrees() < 0.5,
+        "{dt} m, {}°",
+        dr.to_degrees()
+    );
+}

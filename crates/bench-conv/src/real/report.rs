@@ -182,84 +182,32 @@ fn write_comparison(
         .with_context(|| format!("writing {}", path.display()))
 }
 
-/// The cumulative distribution of the pinhole runs' errors, per start and method.
+/// The cumulative distribution of the pinhole runs' errors off the truth, per method.
 fn plot_errors(
     records: &[RunRecord],
     threshold_m: f64,
     png: &Path,
     svg: &Path,
 ) -> anyhow::Result<()> {
-    use plotters::prelude::*;
-    crate::register_font();
-    fn draw<DB: DrawingBackend>(
-        root: DrawingArea<DB, plotters::coord::Shift>,
-        records: &[RunRecord],
-        threshold_m: f64,
-    ) -> anyhow::Result<()> {
-        root.fill(&WHITE).map_err(crate::plot::error)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "Cumulative distribution of final position errors (pinhole)",
-                ("sans-serif", 20),
-            )
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(50)
-            .build_cartesian_2d((1e-3f64..10.0f64).log_scale(), 0.0f64..100.0)
-            .map_err(crate::plot::error)?;
-        chart
-            .configure_mesh()
-            .x_desc("final position error (m)")
-            .y_desc("localisations (%)")
-            .draw()
-            .map_err(crate::plot::error)?;
-        crate::plot::line(
-            &mut chart,
-            vec![(threshold_m, 0.0), (threshold_m, 100.0)],
-            format!("{:.0} cm", threshold_m * 100.0),
-            BLACK.stroke_width(1),
-        )?;
-        let pinhole: Vec<&RunRecord> = records
-            .iter()
-            .filter(|r| r.camera == "pinhole" && r.start != "truth")
-            .collect();
-        let mut series: Vec<String> = Vec::new();
-        for r in &pinhole {
-            if !series.contains(&r.method) {
-                series.push(r.method.clone());
-            }
+    let pinhole: Vec<&RunRecord> = records
+        .iter()
+        .filter(|r| r.camera == "pinhole" && r.start != "truth")
+        .collect();
+    let mut series: Vec<(String, Vec<f64>)> = Vec::new();
+    for r in &pinhole {
+        match series.iter_mut().find(|(m, _)| *m == r.method) {
+            Some((_, errors)) => errors.push(r.error_m),
+            None => series.push((r.method.clone(), vec![r.error_m])),
         }
-        for (i, method) in series.iter().enumerate() {
-            let mut errors: Vec<f64> = pinhole
-                .iter()
-                .filter(|r| &r.method == method)
-                .map(|r| r.error_m.clamp(1e-3, 10.0))
-                .collect();
-            errors.sort_by(f64::total_cmp);
-            let n = errors.len() as f64;
-            let mut points = vec![(1e-3, 0.0)];
-            for (k, e) in errors.iter().enumerate() {
-                points.push((*e, 100.0 * k as f64 / n));
-                points.push((*e, 100.0 * (k + 1) as f64 / n));
-            }
-            points.push((10.0, 100.0));
-            let color = Palette99::pick(i).to_rgba();
-            crate::plot::line(&mut chart, points, method.clone(), color.stroke_width(2))?;
-        }
-        crate::plot::finish(&mut chart, &root)
     }
-    draw(
-        BitMapBackend::new(png, (900, 600)).into_drawing_area(),
-        records,
+    crate::report::plot_error_cdf(
+        "Cumulative distribution of final position errors (pinhole, starts off the truth)",
+        [1e-3, 10.0],
+        &series,
         threshold_m,
+        png,
+        svg,
     )
-    .with_context(|| format!("plotting {}", png.display()))?;
-    draw(
-        SVGBackend::new(svg, (900, 600)).into_drawing_area(),
-        records,
-        threshold_m,
-    )
-    .with_context(|| format!("plotting {}", svg.display()))
 }
 
 /// The tracking errors per frame, one line per track.
