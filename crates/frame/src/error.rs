@@ -60,6 +60,13 @@ pub enum FrameError {
         /// [`ucm::MAX_PIXELS`].
         limit: u64,
     },
+    /// A JPEG picture ends before its last scan does: a truncated file, which the
+    /// decoder would fill with grey.
+    #[error("picture {path} is truncated: its JPEG data end inside the image's last scan")]
+    TruncatedJpeg {
+        /// The picture's file.
+        path: PathBuf,
+    },
     /// A camera could not be built.
     #[error(transparent)]
     Camera(#[from] ucm::UcmError),

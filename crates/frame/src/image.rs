@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use ::image::{DynamicImage, ImageReader};
+use ::image::{DynamicImage, ImageFormat, ImageReader};
 
 use crate::{AnyImage, FrameError};
 
@@ -127,10 +127,16 @@ impl Image {
                 height: camera.height(),
             });
         }
-        let decoded = ImageReader::open(path)
+        let reader = ImageReader::open(path)
             .map_err(io)?
             .with_guessed_format()
-            .map_err(io)?
+            .map_err(io)?;
+        if reader.format() == Some(ImageFormat::Jpeg) && !jpeg_is_complete(path).map_err(io)? {
+            return Err(FrameError::TruncatedJpeg {
+                path: path.to_owned(),
+            });
+        }
+        let decoded = reader
             .decode()
             .map_err(error)?
             .crop_imm(x, y, width, height);
@@ -316,5 +322,36 @@ impl AnyImage for Image {
 
     fn downsampled(&self, factor: u32, camera_coarse: &ucm::Camera) -> Result<Self, FrameError> {
         Image::downsampled(self, factor, camera_coarse)
+    }
+}
+
+/// Whether the JPEG file at `path` holds an end-of-image marker after its last scan's
+/// start (`FF D9` after the last `FF DA`): a truncated file does not, and the decoder
+/// fills what it lacks with grey. Inside a scan a data byte `FF` is followed by `00`
+/// (or a restart marker), so the markers are found by reading the bytes in one pass,
+/// in constant memory.
+fn jpeg_is_complete(path: &Path) -> std::io::Result<bool> {
+    use std::io::Read;
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path)?);
+    let (mut scan_seen, mut ended_after_scan, mut previous_ff) = (false, false, false);
+    let mut buffer = [0u8; 64 * 1024];
+    loop {
+        let read = reader.read(&mut buffer)?;
+        if read == 0 {
+            return Ok(scan_seen && ended_after_scan);
+        }
+        for &byte in &buffer[..read] {
+            if previous_ff {
+                match byte {
+                    0xDA => {
+                        scan_seen = true;
+                        ended_after_scan = false;
+                    }
+                    0xD9 => ended_after_scan = true,
+                    _ => {}
+                }
+            }
+            previous_ff = byte == 0xFF;
+        }
     }
 }

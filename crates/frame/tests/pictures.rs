@@ -132,6 +132,34 @@ fn crops_and_refuses_bad_input() {
     assert!(Image::load(&broken, &camera, None).is_err());
 }
 
+/// A truncated JPEG is refused, where the decoder fills what it lacks with grey: cut
+/// in half, cut to its headers and first bytes of data, cut just before its end marker.
+/// The whole file, and the file with bytes after its end, are read.
+#[test]
+fn refuses_truncated_jpegs() {
+    let picture = image::RgbImage::from_fn(64, 48, |x, y| {
+        image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x * y) % 251) as u8])
+    });
+    let path = temp("whole.jpg");
+    picture.save(&path).unwrap();
+    let camera = camera(64, 48, ValidRegion::Full);
+    let whole = Image::load(&path, &camera, None).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = temp("cut.jpg");
+    let scan = bytes.windows(2).position(|w| w == [0xFF, 0xDA]).unwrap();
+    for length in [bytes.len() / 2, scan + 40, bytes.len() - 2] {
+        std::fs::write(&cut, &bytes[..length]).unwrap();
+        match Image::load(&cut, &camera, None) {
+            Err(FrameError::TruncatedJpeg { path }) => assert_eq!(path, cut),
+            other => panic!("{length} of {} bytes: {other:?}", bytes.len()),
+        }
+    }
+    let mut trailing = bytes.clone();
+    trailing.extend_from_slice(b"trailing bytes");
+    std::fs::write(&cut, &trailing).unwrap();
+    assert_eq!(Image::load(&cut, &camera, None).unwrap(), whole);
+}
+
 /// A PNG header announcing more pixels than `ucm::MAX_PIXELS` is refused before any
 /// decoding (the file itself is tiny).
 #[test]

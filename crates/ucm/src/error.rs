@@ -93,6 +93,14 @@ pub enum UcmError {
         /// The cause.
         source: std::io::Error,
     },
+    /// A camera or calibration file is not a small UTF-8 text file.
+    #[error("{path} is not a camera or calibration file: {message}")]
+    NotText {
+        /// The file.
+        path: PathBuf,
+        /// What it is instead.
+        message: String,
+    },
     /// A camera TOML file could not be parsed.
     #[error("invalid camera file {path}: {source}")]
     Toml {

@@ -32,9 +32,11 @@
 //!
 //! Unknown keys are errors (a typo must not silently fall back to a default).
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use yaml_rust2::{Yaml, YamlLoader};
 
 use crate::{Annulus, Camera, Distortion, Intrinsics, Mask, UcmError, ValidRegion};
 
@@ -116,10 +118,7 @@ impl Camera {
     /// Read a camera TOML file (format in the [module documentation](crate::io)).
     pub fn load_toml(path: impl AsRef<Path>) -> Result<Self, UcmError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| UcmError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = read_text_file(path)?;
         Self::parse_toml(&text, path.parent(), path)
     }
 
@@ -191,7 +190,10 @@ impl Camera {
 
     /// Read a Mei calibration in the YAML layout of `omniunwarp` (keys `K`: the 3×3
     /// matrix `[fx, s, u0; 0, fy, v0; 0, 0, 1]` row-major, `D`: `[k1, k2, p1, p2]`,
-    /// `Xi`: `[ξ]`). The file holds no image size or mask: give them.
+    /// `Xi`: `[ξ]` or `ξ`), in flow (`[a, b]`) or block (`- a` lines) style, or each an
+    /// OpenCV matrix (`!!opencv-matrix` with `data: [...]`; OpenCV's `%YAML:1.0` first
+    /// line is accepted). The file holds no image size or mask: give them. Files over
+    /// [`MAX_TEXT_FILE_BYTES`] are refused unread.
     pub fn load_mei_yaml(
         path: impl AsRef<Path>,
         width: u32,
@@ -199,17 +201,15 @@ impl Camera {
         region: ValidRegion,
     ) -> Result<Self, UcmError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| UcmError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
         let bad = |message: String| UcmError::Calibration {
             path: path.to_owned(),
             message,
         };
-        let k = yaml_list(&text, "K").map_err(&bad)?;
-        let d = yaml_list(&text, "D").map_err(&bad)?;
-        let xi = yaml_list(&text, "Xi").map_err(&bad)?;
+        let text = read_text_file(path)?;
+        let document = yaml_document(&text).map_err(&bad)?;
+        let k = yaml_numbers(&document, "K").map_err(&bad)?;
+        let d = yaml_numbers(&document, "D").map_err(&bad)?;
+        let xi = yaml_numbers(&document, "Xi").map_err(&bad)?;
         if k.len() != 9 || d.len() != 4 || xi.len() != 1 {
             return Err(bad(format!(
                 "expected 9 values in K, 4 in D and 1 in Xi, found {}, {} and {}",
@@ -241,36 +241,92 @@ impl Camera {
     }
 }
 
-/// The numbers of a flow list `KEY: [a, b, ...]` (possibly over several lines).
-fn yaml_list(text: &str, key: &str) -> Result<Vec<f64>, String> {
-    let start = text
-        .lines()
-        .scan(0usize, |offset, line| {
-            let here = *offset;
-            *offset += line.len() + 1;
-            Some((here, line))
-        })
-        .find(|(_, line)| {
-            let line = line.trim_start();
-            line.strip_prefix(key)
-                .is_some_and(|rest| rest.trim_start().starts_with(':'))
-        })
-        .map(|(offset, _)| offset)
-        .ok_or_else(|| format!("key `{key}` not found"))?;
-    let rest = &text[start..];
-    let open = rest
-        .find('[')
-        .ok_or_else(|| format!("`{key}` is not a [list]"))?;
-    let close = rest[open..]
-        .find(']')
-        .ok_or_else(|| format!("`{key}`: unterminated list"))?;
-    rest[open + 1..open + close]
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            s.parse::<f64>()
-                .map_err(|e| format!("`{key}`: `{s}` is not a number ({e})"))
+/// The largest camera or calibration file read (either is a few hundred bytes).
+pub const MAX_TEXT_FILE_BYTES: u64 = 1 << 20;
+
+/// The text of a camera or calibration file: at most [`MAX_TEXT_FILE_BYTES`], UTF-8.
+fn read_text_file(path: &Path) -> Result<String, UcmError> {
+    let io = |source| UcmError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let not_text = |message: String| UcmError::NotText {
+        path: path.to_owned(),
+        message,
+    };
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(MAX_TEXT_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_TEXT_FILE_BYTES {
+        return Err(not_text(format!("larger than {MAX_TEXT_FILE_BYTES} bytes")));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        not_text(format!(
+            "not UTF-8 text (byte {} is not; a binary file?)",
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
+/// The single YAML mapping of a calibration file. OpenCV writes `%YAML:1.0` as its
+/// first line, which YAML 1.2 does not accept: it is read as `%YAML 1.2`'s absence.
+fn yaml_document(text: &str) -> Result<Yaml, String> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let text = match text.strip_prefix("%YAML:") {
+        Some(rest) => rest.split_once('\n').map_or("", |(_, rest)| rest),
+        None => text,
+    };
+    let mut documents = YamlLoader::load_from_str(text).map_err(|e| format!("not YAML: {e}"))?;
+    match documents.len() {
+        1 => {}
+        0 => return Err("empty".into()),
+        n => return Err(format!("{n} YAML documents where one was expected")),
+    }
+    let document = documents.remove(0);
+    if document.as_hash().is_none() {
+        return Err("not a mapping of keys K, D and Xi".into());
+    }
+    Ok(document)
+}
+
+/// The numbers under `key`: a list (flow or block style), an OpenCV matrix (its
+/// `data` list) or one number.
+fn yaml_numbers(document: &Yaml, key: &str) -> Result<Vec<f64>, String> {
+    let value = &document[key];
+    let list = match value {
+        Yaml::BadValue => return Err(format!("key `{key}` not found")),
+        Yaml::Array(list) => list.as_slice(),
+        Yaml::Hash(_) => match &value["data"] {
+            Yaml::Array(list) => list.as_slice(),
+            _ => return Err(format!("`{key}` is a mapping without a `data` list")),
+        },
+        scalar => std::slice::from_ref(scalar),
+    };
+    list.iter()
+        .map(|item| {
+            match item {
+                Yaml::Real(_) => item.as_f64(),
+                Yaml::Integer(i) => Some(*i as f64),
+                _ => None,
+            }
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("`{key}`: {} is not a finite number", yaml_shown(item)))
         })
         .collect()
+}
+
+/// A YAML value as the message of an error shows it.
+fn yaml_shown(value: &Yaml) -> String {
+    match value {
+        Yaml::Real(s) | Yaml::String(s) => format!("`{s}`"),
+        Yaml::Integer(i) => format!("`{i}`"),
+        Yaml::Boolean(b) => format!("`{b}`"),
+        Yaml::Null => "an empty value".into(),
+        Yaml::Array(_) => "a list".into(),
+        Yaml::Hash(_) => "a mapping".into(),
+        Yaml::Alias(_) | Yaml::BadValue => "an alias".into(),
+    }
 }

@@ -200,6 +200,73 @@ fn mei_yaml_errors() {
     )
     .unwrap();
     let err = Camera::load_mei_yaml(&path, 100, 100, ValidRegion::Full).unwrap_err();
-    assert!(err.to_string().contains("not a number"), "{err}");
+    assert!(err.to_string().contains("not a finite number"), "{err}");
+    for (text, expected) in [
+        (
+            "K: [1, 0, 3, 0, 1, 3, 0, 0, 1]\nD: [0, 0, 0, 0]\nXi: [.nan]\n",
+            "finite",
+        ),
+        (
+            "K: [1, 0, 3, 0, 1, 3, 0, 0, 1\nD: [0, 0, 0, 0]\n",
+            "not YAML",
+        ),
+        ("[1, 2, 3]\n", "not a mapping"),
+        ("", "empty"),
+        (
+            "K: {rows: 3}\nD: [0, 0, 0, 0]\nXi: 1\n",
+            "without a `data` list",
+        ),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        let err = Camera::load_mei_yaml(&path, 100, 100, ValidRegion::Full).unwrap_err();
+        assert!(err.to_string().contains(expected), "{text:?}: {err}");
+    }
+    // A binary file, and one far larger than a calibration, are refused as such.
+    std::fs::write(&path, [0x4b, 0x3a, 0xff, 0xfe, 0x00]).unwrap();
+    let err = Camera::load_mei_yaml(&path, 100, 100, ValidRegion::Full).unwrap_err();
+    assert!(err.to_string().contains("not UTF-8"), "{err}");
+    let err = Camera::load_toml(&path).unwrap_err();
+    assert!(err.to_string().contains("not UTF-8"), "{err}");
+    std::fs::write(&path, "# \n".repeat(1 << 19)).unwrap();
+    let err = Camera::load_mei_yaml(&path, 100, 100, ValidRegion::Full).unwrap_err();
+    assert!(err.to_string().contains("larger than"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The layouts a Mei calibration comes in are read as one camera: CRLF line ends,
+/// comments in any script (and holding lists) before the keys, block-style lists, an
+/// OpenCV `!!opencv-matrix` file with its `%YAML:1.0` line, `Xi` as a number.
+#[test]
+fn mei_yaml_layouts() {
+    let dir = std::env::temp_dir().join(format!("ucm-yaml-layouts-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let flow = "K: [300.5, 0.25, 160, 0, 301, 120.5, 0, 0, 1]\nD: [-0.1, 0.02, 0.001, -0.002]\nXi: [0.9]\n";
+    let block = "K:\n  - 300.5\n  - 0.25\n  - 160\n  - 0\n  - 301\n  - 120.5\n  - 0\n  - 0\n  - 1\nD:\n  - -0.1\n  - 0.02\n  - 0.001\n  - -0.002\nXi: 0.9\n";
+    let comments = format!(
+        "# Étalonnage du miroir — caméra n° 2 (日本語)\n{}# D: [0, 0, 0, 0]\n{flow}",
+        "# a comment line\n".repeat(20)
+    );
+    let opencv = "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 300.5, 0.25, 160., 0., 301., 120.5, 0., 0., 1. ]\nD: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   data: [ -0.1, 0.02, 0.001, -0.002 ]\nXi: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ 0.9 ]\n";
+    let load = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        Camera::load_mei_yaml(&path, 320, 240, ValidRegion::Full)
+            .unwrap_or_else(|e| panic!("{name}: {e}"))
+    };
+    let reference = load("flow.yaml", flow);
+    assert_eq!(reference.intrinsics().xi, 0.9);
+    assert_eq!(reference.intrinsics().skew, 0.25);
+    assert_eq!(reference.distortion().unwrap().k1, -0.1);
+    for (name, text) in [
+        ("crlf.yaml", flow.replace('\n', "\r\n")),
+        ("comments-crlf.yaml", comments.replace('\n', "\r\n")),
+        ("comments.yaml", comments.clone()),
+        ("block.yaml", block.to_owned()),
+        ("opencv.yaml", opencv.to_owned()),
+    ] {
+        let camera = load(name, &text);
+        assert_eq!(camera.intrinsics(), reference.intrinsics(), "{name}");
+        assert_eq!(camera.distortion(), reference.distortion(), "{name}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

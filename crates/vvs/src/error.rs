@@ -28,6 +28,25 @@ pub enum VvsError {
         /// Camera height.
         height: u32,
     },
+    /// The desired image holds no intensity on the camera's valid region.
+    #[error("the desired image holds no intensity on the camera's valid region")]
+    EmptyDesired,
+    /// The desired image holds one intensity wherever it is observed: nothing to align.
+    #[error(
+        "the desired image is uniform ({value} on its {observed} observed pixels of the camera's region): nothing to localise"
+    )]
+    UniformDesired {
+        /// Its one intensity.
+        value: f32,
+        /// Its observed pixels in the camera's region.
+        observed: usize,
+    },
+    /// The desired image holds a NaN or infinite intensity.
+    #[error("the desired image's pixel {index} is not finite")]
+    NonFiniteDesired {
+        /// The pixel, row-major.
+        index: usize,
+    },
     /// The initial pose is not finite.
     #[error("initial pose is not finite")]
     NonFinitePose,

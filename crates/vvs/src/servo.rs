@@ -72,6 +72,10 @@ struct Level {
     against_observed: Vec<bool>,
 }
 
+/// The widest intensity range of a desired image that holds nothing to align to (a
+/// sixteenth of an 8-bit level).
+const UNIFORM_INTENSITY_RANGE: f32 = 1.0 / (255.0 * 16.0);
+
 /// The PGM's options of `config`, its brightness normalised or not.
 fn pgm_options(config: &VvsConfig, normalize: bool) -> PgmOptions {
     PgmOptions {
@@ -292,6 +296,30 @@ impl<'a> Servo<'a> {
         }
         if !initial.is_finite() {
             return Err(VvsError::NonFinitePose);
+        }
+        // A picture with nothing to align to (black, white, cut to one value) is an
+        // input error, not a localisation that stalls at a pose.
+        let (mut low, mut high, mut observed) = (f32::INFINITY, f32::NEG_INFINITY, 0usize);
+        let intensity = desired.intensity();
+        for (index, &valid) in self.camera.valid_pixels().iter().enumerate() {
+            if valid && desired.is_observed(index) {
+                let value = intensity[index];
+                if !value.is_finite() {
+                    return Err(VvsError::NonFiniteDesired { index });
+                }
+                low = low.min(value);
+                high = high.max(value);
+                observed += 1;
+            }
+        }
+        if observed == 0 {
+            return Err(VvsError::EmptyDesired);
+        }
+        if high - low <= UNIFORM_INTENSITY_RANGE {
+            return Err(VvsError::UniformDesired {
+                value: low,
+                observed,
+            });
         }
         Ok(())
     }

@@ -45,25 +45,53 @@ fn a_camera_inside_a_building_does_not_report_success() {
     }
 }
 
+/// Pictures with nothing to align to are refused, not localised to a pose that
+/// "stalls" with a low cost: black, white, one grey, nothing observed, a NaN.
 #[test]
-fn an_all_black_desired_image_ends_with_a_clear_status() {
+fn a_desired_image_without_content_is_a_typed_error() {
     let camera = fixture();
     let mut servo = Servo::new(&city().cloud, &camera, short()).unwrap();
-    let mut desired = Frame::for_camera(&camera);
-    for (k, s) in desired.status.iter_mut().enumerate() {
-        *s = if camera.valid_pixels()[k] {
-            PixelStatus::Hit
-        } else {
-            PixelStatus::Masked
-        };
-        desired.range_m[k] = 5.0;
+    let uniform = |value: f32| {
+        let mut desired = Frame::for_camera(&camera);
+        for (k, s) in desired.status.iter_mut().enumerate() {
+            *s = if camera.valid_pixels()[k] {
+                PixelStatus::Hit
+            } else {
+                PixelStatus::Masked
+            };
+            desired.range_m[k] = 5.0;
+            desired.intensity[k] = value;
+        }
+        desired
+    };
+    let valid = camera.valid_pixels().iter().filter(|&&v| v).count();
+    for value in [0.0, 1.0, 0.5] {
+        for method in Method::ALL.into_iter().chain([Method::Global]) {
+            match servo.run(method, &uniform(value), desired_pose()) {
+                Err(VvsError::UniformDesired { value: v, observed }) => {
+                    assert_eq!((v, observed), (value, valid));
+                }
+                other => panic!("{method:?}, {value}: {other:?}"),
+            }
+        }
     }
-    for method in Method::ALL {
-        let outcome = servo.run(method, &desired, desired_pose()).unwrap();
-        // It cannot match a black image: no false success.
-        assert!(outcome.cost > 1e-3, "{method:?}: cost {}", outcome.cost);
-        assert_ne!(outcome.stop, StopReason::Converged, "{method:?}");
-    }
+    // One pixel off by a level is a picture: it runs.
+    let mut almost = uniform(0.5);
+    let k = camera.valid_pixels().iter().position(|&v| v).unwrap();
+    almost.intensity[k] = 0.5 + 1.0 / 255.0;
+    servo.run(Method::Rule2, &almost, desired_pose()).unwrap();
+    let mut unseen = uniform(0.5);
+    unseen.status.fill(PixelStatus::Masked);
+    assert!(matches!(
+        servo.run(Method::Povs, &unseen, desired_pose()),
+        Err(VvsError::EmptyDesired)
+    ));
+    let mut nan = servo.render(&desired_pose()).unwrap();
+    nan.intensity[k] = f32::NAN;
+    assert!(matches!(
+        servo.run(Method::Rule2, &nan, desired_pose()),
+        Err(VvsError::NonFiniteDesired { index }) if index == k
+    ));
 }
 
 #[test]
