@@ -37,8 +37,9 @@ fn bench_conv(args: &[&std::ffi::OsStr], build: Build) -> anyhow::Result<()> {
             .arg(target.join("native"))
             .env("RUSTFLAGS", flags.trim_start());
     }
+    // A reproduction replaces its earlier results (`--force`).
     let status = command
-        .arg("--")
+        .args(["--", "--force"])
         .args(args)
         .status()
         .context("running bench-conv")?;

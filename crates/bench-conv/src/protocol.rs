@@ -355,6 +355,35 @@ impl Protocol {
                 bail!("initial_indices lists {} twice", w[0]);
             }
         }
+        let (t, r) = (self.offsets.translation_m, self.offsets.rotation_deg);
+        if let Some(bad) = t.iter().find(|v| !(**v >= 0.0 && v.is_finite())) {
+            bail!("[offsets] translation_m {bad} is not a finite length >= 0 (in {t:?})");
+        }
+        if let Some(bad) = r.iter().find(|v| !(**v >= 0.0 && **v <= 180.0)) {
+            bail!("[offsets] rotation_deg {bad} is not an angle in [0, 180] (in {r:?})");
+        }
+        // Settings that a protocol sets elsewhere would be overwritten without a word.
+        let tables = std::iter::once(("[vvs]".to_string(), &self.vvs)).chain(
+            self.variant
+                .iter()
+                .map(|v| (format!("variant {}'s [vvs]", v.name), &v.vvs)),
+        );
+        for (name, table) in tables {
+            if table.contains_key("jacobian") {
+                bail!(
+                    "{name} sets `jacobian`, which the protocol's `jacobians` list (or a \
+                     variant's own `jacobian`) decides"
+                );
+            }
+            if let Some(toml::Value::Table(global)) = table.get("global")
+                && global.contains_key("prior")
+            {
+                bail!(
+                    "{name} sets `global.prior`, which the protocol's `[prior]` table (or \
+                     its `[offsets]`) decides"
+                );
+            }
+        }
         if self.offsets.scales.is_empty() {
             bail!("[offsets] scales is empty");
         }

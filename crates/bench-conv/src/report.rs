@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail, ensure};
 use vvs::{Method, StopReason};
@@ -173,6 +173,26 @@ pub fn completeness(
         return Ok(Completeness::Unknown);
     };
     let count = first.shard.map_or(1, |[_, n]| n);
+    // The manifests are files a user can edit: every count is checked before it sizes
+    // anything.
+    for m in &all {
+        if m.runs > m.total_runs {
+            bail!(
+                "a manifest says its CSV holds {} runs of a {}-run protocol",
+                m.runs,
+                m.total_runs
+            );
+        }
+        if let Some([i, n]) = m.shard
+            && !(i < n && n <= m.total_runs.max(1))
+        {
+            bail!(
+                "a manifest names shard {i}/{n} of a {}-run protocol: a shard i/n needs \
+                 i < n <= the number of runs",
+                m.total_runs
+            );
+        }
+    }
     let mut seen = vec![false; count];
     for m in &all {
         if (&m.protocol, m.extras, m.total_runs)
@@ -193,7 +213,7 @@ pub fn completeness(
             );
         }
         let i = m.shard.map_or(0, |[i, _]| i);
-        if i >= count || seen[i] {
+        if seen[i] {
             bail!("shard {i}/{count} is given twice");
         }
         seen[i] = true;
@@ -218,28 +238,152 @@ pub fn completeness(
 /// The file that marks a results folder whose writing has not finished.
 pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
 
+/// The lock file of a results folder being written ([`begin_results`]).
+pub const LOCK_FILE: &str = ".lock";
+
+/// What a results folder may hold from an earlier run of any command: cleared by
+/// [`begin_results`] with `force`. Files named `acquired-n*-frame*.png` (tracking's
+/// last acquired frames) and the folder `pictures/` (the real benchmark's) go too.
+pub const RESULT_FILES: &[&str] = &[
+    "summary.md",
+    "runs.csv",
+    MANIFEST,
+    "domain.csv",
+    "domain.md",
+    "domain.png",
+    "domain.svg",
+    "cdf.png",
+    "cdf.svg",
+    "frames.csv",
+    "rmse.png",
+    "rmse.svg",
+    "errors.png",
+    "errors.svg",
+    "tracking.csv",
+    "tracking.png",
+    "tracking.svg",
+    INCOMPLETE_MARKER,
+];
+
+/// A results folder held by one run: its [`LOCK_FILE`] names the process, and goes
+/// when this is dropped (at the end of the run, or when it fails).
+#[derive(Debug)]
+#[must_use = "the folder is unlocked when this is dropped"]
+pub struct ResultsLock {
+    path: PathBuf,
+}
+
+impl Drop for ResultsLock {
+    fn drop(&mut self) {
+        // Nothing to do if it is already gone.
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Whether the process that wrote the lock file `path` still runs (on Linux, from
+/// `/proc`; elsewhere a lock is taken as held).
+fn lock_is_held(path: &Path) -> bool {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return true;
+    };
+    match text.trim().parse::<u32>() {
+        Ok(pid) if Path::new("/proc/self").exists() => {
+            pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists()
+        }
+        Ok(_) => true,
+        // Unreadable: written by something else, or half-written; held.
+        Err(_) => true,
+    }
+}
+
 /// Prepare the results folder `out` before any work, so that a bad `--out` fails at
-/// once and an interrupted run never leaves a folder that looks complete: the folder
-/// is created (an existing file there is an error), a stale `summary.md` is removed,
-/// and [`INCOMPLETE_MARKER`] is written until [`finish_results`].
-/// Stale `runs.csv` and [`MANIFEST`] go too.
-pub fn begin_results(out: &Path) -> anyhow::Result<()> {
+/// once, two runs never write one folder, earlier results are never replaced without
+/// being asked, and an interrupted run never leaves a folder that looks complete:
+///
+/// - the folder is created (an existing file there is an error);
+/// - a folder another running process writes (its [`LOCK_FILE`]) is refused; a lock
+///   left by a process that no longer runs is taken over;
+/// - a folder holding results of an earlier run ([`RESULT_FILES`]) is refused unless
+///   `force`, which removes them (other files are left alone);
+/// - [`INCOMPLETE_MARKER`] is written until [`finish_results`].
+pub fn begin_results(out: &Path, force: bool) -> anyhow::Result<ResultsLock> {
     if out.exists() && !out.is_dir() {
         bail!("{} exists and is not a folder", out.display());
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    // Stale results of an earlier run must not survive beside new ones.
-    for name in ["summary.md", "runs.csv", MANIFEST] {
-        let stale = out.join(name);
-        if stale.exists() {
-            std::fs::remove_file(&stale)
-                .with_context(|| format!("removing the stale {}", stale.display()))?;
+    let lock_path = out.join(LOCK_FILE);
+    let lock = loop {
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&lock_path)
+        {
+            Ok(mut file) => {
+                use std::io::Write;
+                let lock = ResultsLock {
+                    path: lock_path.clone(),
+                };
+                writeln!(file, "{}", std::process::id())
+                    .with_context(|| format!("writing {}", lock_path.display()))?;
+                break lock;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                if lock_is_held(&lock_path) {
+                    bail!(
+                        "another run is writing its results to {} (its lock file {}; remove it \
+                         if no such run is going on)",
+                        out.display(),
+                        lock_path.display()
+                    );
+                }
+                std::fs::remove_file(&lock_path)
+                    .with_context(|| format!("removing the stale {}", lock_path.display()))?;
+            }
+            Err(e) => {
+                return Err(e).with_context(|| format!("creating {}", lock_path.display()));
+            }
+        }
+    };
+    let mut earlier: Vec<PathBuf> = Vec::new();
+    for entry in std::fs::read_dir(out).with_context(|| format!("reading {}", out.display()))? {
+        let entry = entry.with_context(|| format!("reading {}", out.display()))?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let ours = RESULT_FILES.contains(&name.as_ref())
+            || name == "pictures"
+            || (name.starts_with("acquired-n") && name.ends_with(".png"));
+        if ours {
+            earlier.push(entry.path());
+        }
+    }
+    earlier.sort();
+    if !earlier.is_empty() {
+        if !force {
+            let names: Vec<String> = earlier
+                .iter()
+                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
+            bail!(
+                "{} holds the results of an earlier run ({}): give --force to replace them, \
+                 or another --out",
+                out.display(),
+                names.join(", ")
+            );
+        }
+        for path in &earlier {
+            let removed = if path.is_dir() {
+                std::fs::remove_dir_all(path)
+            } else {
+                std::fs::remove_file(path)
+            };
+            removed.with_context(|| format!("removing the earlier {}", path.display()))?;
         }
     }
     write_atomically(
         &out.join(INCOMPLETE_MARKER),
         b"These results are being written, or their writing was interrupted: do not use them.\n",
-    )
+    )?;
+    Ok(lock)
 }
 
 /// Mark the results folder `out` complete (every file written).
@@ -398,7 +542,7 @@ pub fn apply_threshold(records: &mut [RunRecord], threshold_m: f64) -> anyhow::R
         bail!("the success threshold must be finite and > 0, got {threshold_m}");
     }
     for r in records {
-        r.success = r.final_position_error_m < threshold_m;
+        r.success = r.final_position_error_m < threshold_m && r.cost.is_finite();
     }
     Ok(())
 }
@@ -811,15 +955,17 @@ fn draw_domain<DB: plotters::prelude::DrawingBackend>(
 /// method over the runs of `curve` (each element the rows of one results folder;
 /// `domain.csv`, `domain.png`, `domain.svg`) and, from an axes protocol and its rows,
 /// the basin along each axis; both as Markdown in `domain.md`, which is returned.
+/// `force`: as [`begin_results`]'s.
 pub fn write_domain(
     out: &Path,
     curve: &[Vec<RunRecord>],
     axes: Option<&(crate::protocol::Protocol, Vec<RunRecord>)>,
+    force: bool,
 ) -> anyhow::Result<String> {
     let records: Vec<RunRecord> = curve.iter().flatten().cloned().collect();
     ensure!(!records.is_empty(), "the results folders hold no run");
     let points = domain(&records);
-    begin_results(out)?;
+    let _lock = begin_results(out, force)?;
     let mut text = String::from(
         "# The convergence domain\n\nSuccess (final position error below the protocol's \
          threshold) against the scale s of every offset of the protocol (s = 1: the \

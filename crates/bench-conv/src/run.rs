@@ -58,9 +58,9 @@ pub fn check_shard(protocol: &Protocol, extras: bool, shard: Option<Shard>) -> a
     let methods = protocol.method_configs(extras)?.len().max(1);
     let poses = protocol.runs(extras)?.len() / methods;
     anyhow::ensure!(
-        s.index < poses,
-        "shard {}/{} has no run: the protocol has {poses} poses (desired × initial × scale), \
-         so at most {poses} shards",
+        s.count <= poses,
+        "shard {}/{}: the protocol has {poses} poses (desired × initial × scale), so at most \
+         {poses} shards, each with a run",
         s.index,
         s.count
     );
@@ -269,7 +269,8 @@ impl Shared<'_> {
                     let mut records = Vec::with_capacity(job.len());
                     for (spec, outcome) in job.iter().zip(outcomes) {
                         let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);
-                        let success = dt < protocol.success_threshold_m;
+                        // A run whose cost is not finite is never a success.
+                        let success = dt < protocol.success_threshold_m && outcome.cost.is_finite();
                         records.push(RunRecord {
                             run_id: spec.id,
                             scene: scene_name.to_string(),

@@ -266,6 +266,36 @@ fn bad_protocols_are_clear_errors() {
             ),
             "is not finite",
         ),
+        (
+            good.replace("rotation_deg = [1.0, 1.0, 2.0]", "rotation_deg = [1e10, 1.0, 2.0]"),
+            "not an angle in [0, 180]",
+        ),
+        (
+            good.replace("translation_m = [0.3, 0.1, 0.1]", "translation_m = [inf, 0.1, 0.1]"),
+            "not a finite length",
+        ),
+        (
+            good.replace("[vvs]\n", "[vvs]\njacobian = \"paper\"\n"),
+            "sets `jacobian`",
+        ),
+        (
+            good.replace(
+                "[vvs]\n",
+                "[vvs]\nglobal = { prior = { translation_m = [1.0, 1.0, 1.0], rotation_deg = [1.0, 1.0, 1.0] } }\n",
+            ),
+            "sets `global.prior`",
+        ),
+        (
+            good.replace(
+                "vvs = { levenberg_marquardt = 0.1 }",
+                "vvs = { jacobian = \"paper\" }",
+            ),
+            "variant rule2/lm's [vvs] sets `jacobian`",
+        ),
+        (
+            good.replace("max_iterations = 4", "max_iterations = 2"),
+            "leaves step 2 no iteration",
+        ),
     ] {
         let path = dir.join("broken.toml");
         std::fs::write(&path, &broken).unwrap();
@@ -314,7 +344,17 @@ fn bad_protocols_are_clear_errors() {
         )
         .unwrap_err()
     );
-    assert!(message.contains("shard 5/8 has no run"), "{message}");
+    assert!(message.contains("at most 3 shards"), "{message}");
+    // More shards than poses, whichever shard is asked for (some would hold no run).
+    for text in ["0/4", "1/1000000", "0/18446744073709551615"] {
+        let shard = Shard::parse(text).unwrap();
+        let message = format!(
+            "{:#}",
+            bench_conv::run::check_shard(&protocol, false, Some(shard)).unwrap_err()
+        );
+        assert!(message.contains("at most 3 shards"), "{text}: {message}");
+    }
+    bench_conv::run::check_shard(&protocol, false, Some(Shard::parse("2/3").unwrap())).unwrap();
     for bad in ["1/2/3", "a/2", "2/2", "1", "-1/2"] {
         let message = format!("{:#}", Shard::parse(bad).unwrap_err());
         assert!(message.contains("write i/n"), "{bad}: {message}");
@@ -329,7 +369,7 @@ fn bad_protocols_are_clear_errors() {
 #[test]
 fn csv_thresholds_and_results_folders_are_safe() {
     use bench_conv::report::{
-        INCOMPLETE_MARKER, RunRecord, apply_threshold, begin_results, finish_results,
+        INCOMPLETE_MARKER, LOCK_FILE, RunRecord, apply_threshold, begin_results, finish_results,
     };
     let dir = temp("csv");
     let record = |id: usize, error: f64| RunRecord {
@@ -346,7 +386,7 @@ fn csv_thresholds_and_results_folders_are_safe() {
         iterations_step2: 4,
         stop: vvs::StopReason::Stalled,
         lambda: 1.0,
-        cost: f64::NAN,
+        cost: 1e-3,
         wall_time_s: 0.25,
         success: error < 0.02,
     };
@@ -370,20 +410,47 @@ fn csv_thresholds_and_results_folders_are_safe() {
     let mut rethresholded = records.clone();
     apply_threshold(&mut rethresholded, 1.0).unwrap();
     assert!(rethresholded.iter().all(|r| r.success));
+    // A run whose cost is not finite is never a success.
+    rethresholded[0].cost = f64::NAN;
+    apply_threshold(&mut rethresholded, 1.0).unwrap();
+    assert!(!rethresholded[0].success && rethresholded[1].success);
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         assert!(apply_threshold(&mut rethresholded, bad).is_err());
     }
     let out = dir.join("results");
     std::fs::create_dir_all(&out).unwrap();
-    std::fs::write(out.join("summary.md"), "stale").unwrap();
-    begin_results(&out).unwrap();
-    assert!(out.join(INCOMPLETE_MARKER).exists() && !out.join("summary.md").exists());
+    // Earlier results are refused without --force, and replaced with it: the files a
+    // run writes go (a stale domain.csv, the pictures/ folder), others stay.
+    for name in ["summary.md", "domain.csv", "notes.txt"] {
+        std::fs::write(out.join(name), "stale").unwrap();
+    }
+    std::fs::create_dir_all(out.join("pictures")).unwrap();
+    std::fs::write(out.join("pictures/1.png"), "stale").unwrap();
+    let message = format!("{:#}", begin_results(&out, false).unwrap_err());
+    assert!(
+        message.contains("--force") && message.contains("domain.csv, pictures, summary.md"),
+        "{message}"
+    );
+    assert!(out.join("summary.md").exists() && !out.join(LOCK_FILE).exists());
+    let lock = begin_results(&out, true).unwrap();
+    assert!(out.join(INCOMPLETE_MARKER).exists() && out.join("notes.txt").exists());
+    for gone in ["summary.md", "domain.csv", "pictures"] {
+        assert!(!out.join(gone).exists(), "{gone}");
+    }
+    // A second run into the folder while the first holds it is refused, even forced.
+    let message = format!("{:#}", begin_results(&out, true).unwrap_err());
+    assert!(message.contains("another run"), "{message}");
     // A CSV beside the marker (an interrupted run) is refused by merge's reader.
     write_csv(&out.join("runs.csv"), &records).unwrap();
     assert!(read_csv(&out.join("runs.csv")).is_err());
     finish_results(&out).unwrap();
-    assert!(!out.join(INCOMPLETE_MARKER).exists());
-    let message = format!("{:#}", begin_results(&path).unwrap_err());
+    drop(lock);
+    assert!(!out.join(INCOMPLETE_MARKER).exists() && !out.join(LOCK_FILE).exists());
+    // The lock of a process that no longer runs is taken over.
+    std::fs::write(out.join(LOCK_FILE), format!("{}\n", u32::MAX)).unwrap();
+    let lock = begin_results(&out, true).unwrap();
+    drop(lock);
+    let message = format!("{:#}", begin_results(&path, false).unwrap_err());
     assert!(message.contains("not a folder"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -215,6 +215,24 @@ max_iterations = 80
     .unwrap();
     let err = SequenceSpec::load(&dir.join("bad.toml")).unwrap_err();
     assert!(format!("{err:#}").contains("steps"), "{err:#}");
+    for (broken, says) in [
+        (
+            text.replace("frame_steps = [3]", "frame_steps = [7]"),
+            "N must be below the frame count",
+        ),
+        (
+            text.replace("frame_steps = [3]", "frame_steps = [3, 3]"),
+            "lists 3 twice",
+        ),
+        (
+            text.replace("frames = 7", "frames = 7\nfps = 1e300"),
+            "fps must be in",
+        ),
+    ] {
+        std::fs::write(dir.join("bad.toml"), broken).unwrap();
+        let err = SequenceSpec::load(&dir.join("bad.toml")).unwrap_err();
+        assert!(format!("{err:#}").contains(says), "{says}: {err:#}");
+    }
     // The prediction and the recovery parse, strictly.
     let with = |extra: &str| {
         let text = text.replace(

@@ -6,6 +6,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::VvsError;
 
+/// The largest iteration budget accepted (`max_iterations`): a localisation takes a few
+/// hundred iterations; a budget beyond this is a typo, not a setting.
+pub const MAX_ITERATIONS: usize = 100_000;
+
+/// The largest PGM sample stride accepted (`pgm_stride`): beyond it the PGM holds too
+/// few samples of a picture to mean anything.
+pub const MAX_PGM_STRIDE: u32 = 16;
+
 /// Which method aligns the image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -246,8 +254,23 @@ impl VvsConfig {
                 return bad(name, format!("{l} is outside [0.5, 40] px"));
             }
         }
-        if self.step1_max_iterations > self.max_iterations {
-            return bad("step1_max_iterations", "exceeds max_iterations".into());
+        if self.max_iterations > MAX_ITERATIONS {
+            return bad(
+                "max_iterations",
+                format!(
+                    "{} exceeds the cap of {MAX_ITERATIONS}",
+                    self.max_iterations
+                ),
+            );
+        }
+        if self.step1_max_iterations >= self.max_iterations {
+            return bad(
+                "step1_max_iterations",
+                format!(
+                    "{} leaves step 2 no iteration of max_iterations = {}",
+                    self.step1_max_iterations, self.max_iterations
+                ),
+            );
         }
         for (name, v) in [
             ("converged_translation_m", self.converged_translation_m),
@@ -310,8 +333,11 @@ impl VvsConfig {
             );
         }
         self.global.validate()?;
-        if self.pgm_stride == 0 {
-            return bad("pgm_stride", "must be >= 1".into());
+        if !(1..=MAX_PGM_STRIDE).contains(&self.pgm_stride) {
+            return bad(
+                "pgm_stride",
+                format!("must be in 1..={MAX_PGM_STRIDE}, got {}", self.pgm_stride),
+            );
         }
         if !(self.pgm_recursive_from_lambda > 0.0) {
             return bad(

@@ -11,7 +11,7 @@ mod servo;
 pub mod solve;
 pub mod track;
 
-pub use config::{Method, Robust, Support, VvsConfig};
+pub use config::{MAX_ITERATIONS, MAX_PGM_STRIDE, Method, Robust, Support, VvsConfig};
 pub use error::VvsError;
 pub use global::{GlobalConfig, PriorBox, SearchReport, turned, turned_about_optical_axis};
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};

@@ -28,6 +28,12 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         ("lambda_star_step1 = 100.0", "lambda_star_step1"),
         ("step1_max_iterations = 300", "step1_max_iterations"),
         ("pgm_stride = 0", "pgm_stride"),
+        ("pgm_stride = 4294967295", "pgm_stride"),
+        ("step1_max_iterations = 250", "step1_max_iterations"),
+        (
+            "max_iterations = 1000000000000\nstep1_max_iterations = 1000000000000\nstall_window = 0",
+            "max_iterations",
+        ),
         (
             "pgm_recursive_from_lambda = 0.0",
             "pgm_recursive_from_lambda",

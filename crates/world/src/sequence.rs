@@ -50,6 +50,9 @@ macro_rules! ensure {
 }
 
 /// Most frames a sequence may have: every frame is rendered and kept (about 70 KB
+/// The highest frame rate of a trajectory, frames per second (a high-speed camera's).
+pub const MAX_FPS: f64 = 10_000.0;
+
 /// at 320×240, per tracking configuration), so 10 000 frames take about 0.7 GB each.
 pub const MAX_FRAMES: usize = 10_000;
 /// Longest path of a sequence, metres.
@@ -207,8 +210,9 @@ impl Trajectory {
             self.frames
         );
         ensure!(
-            self.fps > 0.0 && finite(self.fps),
-            "trajectory.fps must be > 0"
+            self.fps > 0.0 && self.fps <= MAX_FPS,
+            "trajectory.fps must be in (0, {MAX_FPS}], got {}",
+            self.fps
         );
         ensure!(
             self.start.iter().all(|v| finite(*v))

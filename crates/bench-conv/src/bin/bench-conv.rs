@@ -14,6 +14,10 @@ use world::city::{City, CityParams};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Replace the results of an earlier run in the results folder (--out of run,
+    /// track, merge, domain and real), which is refused otherwise.
+    #[arg(long, global = true)]
+    force: bool,
 }
 
 #[derive(Subcommand)]
@@ -269,7 +273,9 @@ The largest offset of those run from which every run along the axis (both signs,
 }
 
 fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+    let cli = Cli::parse();
+    let force = cli.force;
+    match cli.command {
         Command::Run {
             protocol,
             out,
@@ -284,7 +290,7 @@ fn main() -> anyhow::Result<()> {
                 .map(bench_conv::run::Shard::parse)
                 .transpose()?;
             bench_conv::run::check_shard(&protocol, extras, shard)?;
-            bench_conv::report::begin_results(&out)?;
+            let _lock = bench_conv::report::begin_results(&out, force)?;
             let (cloud, scene) = bench_conv::run::load_scene(&protocol)?;
             let records = bench_conv::run::run_protocol(&protocol, &cloud, &scene, extras, shard)?;
             let title = match shard {
@@ -324,7 +330,7 @@ fn main() -> anyhow::Result<()> {
         Command::Track { sequence, out } => {
             use bench_conv::tracking;
             let spec = tracking::SequenceSpec::load(&sequence)?;
-            bench_conv::report::begin_results(&out)?;
+            let _lock = bench_conv::report::begin_results(&out, force)?;
             let camera = spec.load_camera()?;
             let (cloud, acquired_cloud) = spec.load_clouds()?;
             let (results, acquired) =
@@ -381,7 +387,7 @@ fn main() -> anyhow::Result<()> {
                 )),
                 _ => None,
             };
-            let text = bench_conv::report::write_domain(&out, &curve, axes.as_ref())?;
+            let text = bench_conv::report::write_domain(&out, &curve, axes.as_ref(), force)?;
             println!("{text}");
             println!("results in {}", out.display());
         }
@@ -398,6 +404,18 @@ fn main() -> anyhow::Result<()> {
                 .iter()
                 .map(|p| bench_conv::report::read_manifest(p))
                 .collect::<anyhow::Result<Vec<_>>>()?;
+            for ((path, part), manifest) in csv.iter().zip(&parts).zip(&manifests) {
+                if let Some(m) = manifest {
+                    anyhow::ensure!(
+                        m.runs == part.len(),
+                        "{} holds {} runs where its manifest says {}: a row was added or \
+                         deleted",
+                        path.display(),
+                        part.len(),
+                        m.runs
+                    );
+                }
+            }
             let mut records = bench_conv::report::merge(parts)?;
             anyhow::ensure!(
                 !records.is_empty(),
@@ -407,7 +425,7 @@ fn main() -> anyhow::Result<()> {
             // Success follows the threshold given here, not the one of the runs.
             bench_conv::report::apply_threshold(&mut records, threshold_m)
                 .context("--threshold-m")?;
-            bench_conv::report::begin_results(&out)?;
+            let _lock = bench_conv::report::begin_results(&out, force)?;
             let (title, manifest) = match &completeness {
                 bench_conv::report::Completeness::Complete { protocol, runs } => (
                     format!("{protocol} (merged)"),
@@ -521,7 +539,7 @@ fn main() -> anyhow::Result<()> {
                 "the data folder {} does not exist",
                 data.display()
             );
-            bench_conv::report::begin_results(&out)?;
+            let _lock = bench_conv::report::begin_results(&out, force)?;
             let (prepared, records, tracks) = bench_conv::real::run_benchmark(spec, &data)?;
             let summary = bench_conv::real::write_results(
                 &prepared,

@@ -501,6 +501,7 @@ impl Benchmark {
                     to_reference_m: None,
                     to_reference_deg: None,
                     success: !diverged
+                        && outcome.cost.is_finite()
                         && error_m < self.spec.success_m
                         && error_rad.to_degrees() < self.spec.success_deg,
                     time_s: outcome.time_s,
