@@ -41,6 +41,17 @@
 //! weighting (`VvsConfig::robust`) each run weighs its own residuals, so the ranking
 //! is then approximate.
 //!
+//! On the common support ([`crate::Support::Common`], the `Localizer`'s) each candidate
+//! is compared on the pixels its rendering and the picture share, so scores of
+//! candidates that see different parts of the picture must not favour the smaller
+//! part: both scores below are divided by the fraction of the picture's pixels
+//! compared. The screening keeps the [`GlobalConfig::screened`] best by one minus the
+//! PGMs' correlation (on a photograph a small, smooth support matches anything in the
+//! squared difference) and as many by their mean squared difference (which tells
+//! renderings apart whose PGMs differ in contrast alone), and the descents are ranked
+//! by the correlation at their end, the picture unturned: their own costs compare
+//! pictures normalised over supports of different shapes.
+//!
 //! The outcome is that of the winning refinement, with a [`SearchReport`] of what the
 //! search did and its whole time in `time_s`.
 
@@ -387,7 +398,10 @@ pub struct GlobalConfig {
     pub tilt_spacing_deg: Option<f64>,
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
-    /// Candidates kept after screening, each then descends.
+    /// Candidates kept after screening, each then descends. On the common support
+    /// ([`crate::Support::Common`]) this many by each of two scores (the PGMs'
+    /// correlation and their mean squared difference, each divided by the fraction
+    /// of the picture compared), so up to twice as many descents.
     pub screened: usize,
     /// Iterations of each low-resolution descent.
     pub descent_iterations: usize,

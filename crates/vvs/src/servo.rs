@@ -135,6 +135,10 @@ pub struct Servo<'a> {
     /// With [`Support::Common`]: the desired picture turned back by each orientation
     /// (its PGM is taken on each node's common support).
     search_pictures: Vec<Image>,
+    /// With [`Support::Common`]: per orientation, the second screening score (the
+    /// PGMs' mean squared difference over the compared samples, divided by the
+    /// fraction of the picture compared) beside the correlation's in the costs.
+    search_squared: Vec<f64>,
     rows9: Vec<[f32; 9]>,
     columns: [Vec<f32>; 2],
     vignetting_start: [f64; 2],
@@ -171,6 +175,7 @@ impl<'a> Servo<'a> {
             search_weights: Vec::new(),
             search_masked: Vec::new(),
             search_pictures: Vec::new(),
+            search_squared: Vec::new(),
             rows9: Vec::new(),
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
@@ -470,7 +475,11 @@ impl<'a> Servo<'a> {
         };
         let mut screened: Vec<(f64, usize, usize)> =
             Vec::with_capacity(nodes.len() * orientations.len());
+        let mut squared: Vec<(f64, usize, usize)> = Vec::new();
         let mut costs = vec![f64::INFINITY; orientations.len()];
+        self.search_squared.clear();
+        self.search_squared
+            .resize(orientations.len(), f64::INFINITY);
         let identity = orientations.iter().position(|o| *o == [0.0; 3]);
         for index in 0..nodes.len() {
             self.search_cost(search, &node_pose(index, 0), lambda, &mut costs)?;
@@ -478,10 +487,46 @@ impl<'a> Servo<'a> {
                 if cost.is_finite() {
                     screened.push((cost, index, orientation));
                 }
+                if common && self.search_squared[orientation].is_finite() {
+                    squared.push((self.search_squared[orientation], index, orientation));
+                }
             }
         }
-        screened.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-        screened.truncate(settings.screened);
+        let order = |a: &(f64, usize, usize), b: &(f64, usize, usize)| {
+            a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
+        };
+        screened.sort_by(order);
+        if common {
+            // On the common support, the `screened` best by each score, in turn: the
+            // correlation finds a photograph's pose where small smooth supports fool
+            // the squared difference, which tells apart renderings whose PGMs differ
+            // in contrast alone (either list alone loses poses the other finds).
+            squared.sort_by(order);
+            let target = 2 * settings.screened;
+            let mut merged: Vec<(f64, usize, usize)> = Vec::with_capacity(target);
+            let mut lists = [screened.iter(), squared.iter()];
+            'merge: while merged.len() < target {
+                let mut any = false;
+                for list in &mut lists {
+                    for &(score, index, orientation) in list.by_ref() {
+                        any = true;
+                        if !merged.iter().any(|m| (m.1, m.2) == (index, orientation)) {
+                            merged.push((score, index, orientation));
+                            break;
+                        }
+                    }
+                    if merged.len() == target {
+                        break 'merge;
+                    }
+                }
+                if !any {
+                    break;
+                }
+            }
+            screened = merged;
+        } else {
+            screened.truncate(settings.screened);
+        }
 
         let screening_s = started.elapsed().as_secs_f64();
         // Descents of the best, at low resolution.
@@ -645,8 +690,9 @@ impl<'a> Servo<'a> {
             // Each orientation on its own common support: the node's hits that the
             // turned picture observes.
             let samples = pgm.samples().len().max(1);
-            for (((cost, picture), weights), &masked) in costs
+            for ((((cost, squared), picture), weights), &masked) in costs
                 .iter_mut()
+                .zip(self.search_squared.iter_mut())
                 .zip(&self.search_pictures)
                 .zip(self.search_weights.chunks_exact(samples))
                 .zip(&self.search_masked)
@@ -676,13 +722,17 @@ impl<'a> Servo<'a> {
                 let compared = support.iter().filter(|&&s| s).count() as f64;
                 let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
                 let coverage = compared / observed;
-                *cost = if w_sum > 0.0 && coverage > 0.0 {
+                (*cost, *squared) = if w_sum > 0.0 && coverage > 0.0 {
                     let (ma, mb) = (a_sum / w_sum, b_sum / w_sum);
                     let (va, vb) = (aa / w_sum - ma * ma, bb / w_sum - mb * mb);
                     let correlation = (ab / w_sum - ma * mb) / (va * vb).sqrt().max(1e-30);
-                    (1.0 - correlation) / coverage
+                    let mean_squared = (aa - 2.0 * ab + bb) / w_sum;
+                    (
+                        (1.0 - correlation) / coverage,
+                        mean_squared.max(0.0) / coverage,
+                    )
                 } else {
-                    f64::INFINITY
+                    (f64::INFINITY, f64::INFINITY)
                 };
             }
             return Ok(());
