@@ -259,3 +259,56 @@ max_iterations = 80
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The real benchmark's tracking settings: the fixtures parse (7-Scenes tracks with
+/// both predictions), and bad frame steps or predictions are refused.
+#[test]
+fn real_benchmark_tracking_settings_are_checked() {
+    let real = root().join("fixtures/real");
+    let kitchen = bench_conv::real::RealSpec::load(&real.join("bench-redkitchen.toml")).unwrap();
+    let tracking = kitchen.tracking.clone().unwrap();
+    assert_eq!(
+        tracking.predictions,
+        [Prediction::Last, Prediction::ConstantVelocity]
+    );
+    let house = bench_conv::real::RealSpec::load(&real.join("bench-house.toml")).unwrap();
+    assert!(house.tracking.is_none());
+    let dir = std::env::temp_dir().join(format!("bench-conv-real-spec-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(real.join("redkitchen.toml"), dir.join("redkitchen.toml")).unwrap();
+    let text = std::fs::read_to_string(real.join("bench-redkitchen.toml")).unwrap();
+    for (from, to, says) in [
+        (
+            "frame_steps = [1, 2, 5, 10]",
+            "frame_steps = [1, 2, 2]",
+            "twice",
+        ),
+        (
+            "frame_steps = [1, 2, 5, 10]",
+            "frame_steps = [1, 100]",
+            "below the 100",
+        ),
+        (
+            "predictions = [\"last\", \"constant_velocity\"]",
+            "predictions = []",
+            "each prediction once",
+        ),
+        (
+            "predictions = [\"last\", \"constant_velocity\"]",
+            "predictions = [\"last\", \"last\"]",
+            "each prediction once",
+        ),
+        (
+            "predictions = [\"last\", \"constant_velocity\"]",
+            "predictions = [\"sideways\"]",
+            "sideways",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let path = dir.join("bench.toml");
+        std::fs::write(&path, text.replace(from, to)).unwrap();
+        let err = bench_conv::real::RealSpec::load(&path).unwrap_err();
+        assert!(format!("{err:#}").contains(says), "{to}: {err:#}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

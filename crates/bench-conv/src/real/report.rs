@@ -335,7 +335,7 @@ pub fn write_results(
         let threshold = spec.tracking.as_ref().map_or(0.2, |t| t.lost_threshold_m);
         let _ = writeln!(
             text,
-            "\n## Tracking\n\nEach track starts at the truth of its first frame; every used frame is aligned from the estimate of the one before.\n"
+            "\n## Tracking\n\nEach track starts at the truth of its first frame; every used frame is aligned from the estimate of the one before (with *constant velocity*: from the last motion between aligned frames repeated).\n"
         );
         tracking_table(&mut text, tracks, threshold);
     }

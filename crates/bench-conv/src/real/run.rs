@@ -571,21 +571,37 @@ impl Benchmark {
             .iter()
             .map(|&f| Ok(self.dataset.world_from_color(f)?))
             .collect::<anyhow::Result<Vec<_>>>()?;
-        let tracks: Vec<(BenchMethod, usize)> = spec
+        let methods = spec
             .methods
             .iter()
             .map(|m| BenchMethod::parse(m))
-            .collect::<anyhow::Result<Vec<_>>>()?
-            .into_iter()
-            .flat_map(|m| spec.frame_steps.iter().map(move |&n| (m, n)))
-            .collect();
-        let total: usize = tracks.iter().map(|(_, n)| frames.len().div_ceil(*n)).sum();
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let mut tracks: Vec<(BenchMethod, vvs::Prediction, usize)> = Vec::new();
+        for &prediction in &spec.predictions {
+            for &method in &methods {
+                for &step in &spec.frame_steps {
+                    tracks.push((method, prediction, step));
+                }
+            }
+        }
+        let total: usize = tracks.iter().map(|t| frames.len().div_ceil(t.2)).sum();
         let progress = Progress::new(total as u64, "tracked frames");
         let results = tracks
             .par_iter()
-            .map(|&(method, step)| {
+            .map(|&(method, prediction, step)| {
+                let name = match prediction {
+                    vvs::Prediction::Last => method.name(),
+                    other => {
+                        let text = toml::Value::try_from(other)
+                            .ok()
+                            .and_then(|v| v.as_str().map(str::to_owned))
+                            .unwrap_or_default();
+                        format!("{} ({})", method.name(), text.replace('_', " "))
+                    }
+                };
                 let servo = Servo::new(&self.clouds[0], &self.camera, method.config())?;
-                let mut tracker = Tracker::new(servo, method.method, truths[0])?;
+                let mut tracker =
+                    Tracker::new(servo, method.method, truths[0])?.with_prediction(prediction);
                 let mut records = Vec::new();
                 let mut lost = false;
                 for k in (0..frames.len()).step_by(step) {
@@ -594,7 +610,7 @@ impl Benchmark {
                     let (m, rad) = tracker.estimate().distance_to(&truths[k]);
                     lost |= tracker.is_lost() || m > spec.lost_threshold_m;
                     records.push(TrackRecord {
-                        method: method.name(),
+                        method: name.clone(),
                         frame_step: step,
                         frame: frames[k],
                         error_m: m,

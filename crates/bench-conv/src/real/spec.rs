@@ -124,10 +124,19 @@ pub struct TrackingSpec {
     /// synthetic tracking's).
     #[serde(default = "lost_m")]
     pub lost_threshold_m: f64,
+    /// Where each alignment starts (`vvs::Prediction`, default `["last"]`, the
+    /// paper's): every method is tracked with each; a track with another prediction
+    /// than `last` is named `method (prediction)`.
+    #[serde(default = "last_only")]
+    pub predictions: Vec<vvs::Prediction>,
 }
 
 fn lost_m() -> f64 {
     0.5
+}
+
+fn last_only() -> Vec<vvs::Prediction> {
+    vec![vvs::Prediction::Last]
 }
 
 /// The queries resampled to a unified-central-model camera of the same pose.
@@ -281,6 +290,23 @@ impl RealSpec {
             for m in &tracking.methods {
                 BenchMethod::parse(m)?;
             }
+            let frames = crate::parse_frames(&tracking.frames)?.len();
+            let mut steps = tracking.frame_steps.clone();
+            steps.sort_unstable();
+            ensure!(
+                steps.windows(2).all(|w| w[0] != w[1]),
+                "tracking.frame_steps lists an N twice"
+            );
+            ensure!(
+                steps.iter().all(|&n| n < frames),
+                "tracking.frame_steps: every N must be below the {frames} tracked frames"
+            );
+            let mut predictions = tracking.predictions.clone();
+            predictions.sort_by_key(|p| *p as u8);
+            ensure!(
+                !predictions.is_empty() && predictions.windows(2).all(|w| w[0] != w[1]),
+                "tracking.predictions must list each prediction once"
+            );
         }
         if let Some(c) = &self.catadioptric {
             ensure!(
