@@ -27,18 +27,24 @@ fn holed_city() -> PointCloud {
     .unwrap()
 }
 
+/// The fixture camera, its picture of the whole city at the desired pose, and the city
+/// with holes.
+fn whole_picture_and_holed_cloud() -> (ucm::Camera, frame::Frame, PointCloud) {
+    let camera = fixture();
+    let desired = Servo::new(&city().cloud, &camera, VvsConfig::default())
+        .unwrap()
+        .render(&desired_pose())
+        .unwrap();
+    (camera, desired, holed_city())
+}
+
 /// A picture of the whole city, localised in a cloud that lacks part of what it sees:
 /// with the paper's comparison the rendering's empty pixels (sky-grey where the picture
 /// has facades) pull Rule2 a metre away; compared only where the rendering sees a
 /// point, it converges.
 #[test]
 fn a_cloud_with_holes_is_compared_on_the_common_support() {
-    let camera = fixture();
-    let desired = Servo::new(&city().cloud, &camera, VvsConfig::default())
-        .unwrap()
-        .render(&desired_pose())
-        .unwrap();
-    let holed = holed_city();
+    let (camera, desired, holed) = whole_picture_and_holed_cloud();
     let start = offset([0.5, 0.3, 0.2, 0.03, -0.03, 0.05]);
     let error = |support| {
         let config = VvsConfig {
@@ -89,12 +95,7 @@ fn the_localizer_compares_on_the_common_support() {
 /// finds the picture's pose.
 #[test]
 fn the_global_search_on_the_common_support_finds_the_pose_in_a_cloud_with_holes() {
-    let camera = fixture();
-    let desired = Servo::new(&city().cloud, &camera, VvsConfig::default())
-        .unwrap()
-        .render(&desired_pose())
-        .unwrap();
-    let holed = holed_city();
+    let (camera, desired, holed) = whole_picture_and_holed_cloud();
     let degree = std::f64::consts::PI / 180.0;
     let start = offset([8.0, 2.0, 1.5, 10.0 * degree, 10.0 * degree, 15.0 * degree]);
     let config = VvsConfig {
