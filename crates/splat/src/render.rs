@@ -105,7 +105,7 @@ pub struct RenderOptions {
     /// neighbouring points on the image (`None`: draw every point). Default `Some(0.65)`,
     /// about 2.4 samples per pixel where a cell is thinned (with the default splat
     /// size: closer to a pixel-integrated reference than 0.5 px with splats of 1.5,
-    /// and its PGMs too, with 25 % fewer points; `docs/RESULTS.md`, session 13).
+    /// and its PGMs too, with 25 % fewer points; `docs/RESULTS.md`).
     pub lod_spacing_px: Option<f32>,
     /// Splat size factor over the nominal footprint (≥ 1 fills the gaps that the
     /// random jitter of a real sampling leaves). Default 1.25.
@@ -1277,8 +1277,8 @@ fn project_steps(
 
 /// Width of the square splat of a footprint of `size` pixels: the odd width
 /// `2 ⌈(size − 1)/2⌉ + 1`, at most `max_width` (no libm call, no branch). Odd, so that
-/// a splat grows by a ring of pixels around the one holding the projection. (Session
-/// 14 tried `⌈size⌉`, even widths included: closer to a pixel-integrated reference, but
+/// a splat grows by a ring of pixels around the one holding the projection. (`⌈size⌉`,
+/// even widths included, was tried: closer to a pixel-integrated reference, but
 /// a rendering less smooth in the pose — the whole-pipeline finite differences of the
 /// PGM's Jacobian along the optical axis fell from 0.87 to 0.84 in cosine — and every
 /// run of the convergence protocols it changed ended worse; `docs/RESULTS.md`.)
