@@ -119,6 +119,28 @@ pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Res
     spec.world_from_camera()
 }
 
+/// Check the `frame_steps` of a tracking experiment over `frames` frames (1 frame in
+/// N for each N): a non-empty list, each N at least 1, below the frame count (else
+/// the track holds one frame), and listed once.
+pub fn check_frame_steps(steps: &[usize], frames: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !steps.is_empty() && steps.iter().all(|&n| n >= 1),
+        "frame_steps must be a non-empty list of N >= 1"
+    );
+    let mut sorted = steps.to_vec();
+    sorted.sort_unstable();
+    if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
+        anyhow::bail!("frame_steps lists {} twice", w[0]);
+    }
+    if let Some(n) = sorted.iter().find(|&&n| n >= frames) {
+        anyhow::bail!(
+            "frame_steps: 1 frame in {n} of {frames} frames tracks one frame (N must be \
+             below the frame count)"
+        );
+    }
+    Ok(())
+}
+
 /// Parse a list of frame numbers: comma-separated numbers and inclusive ranges
 /// `first-last`, a range optionally stepped (`0-999/10`: 0, 10, …, 990), in the order
 /// given, without repeats. At most [`rgbd::MAX_FRAMES`] frames.

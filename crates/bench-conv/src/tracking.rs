@@ -107,22 +107,7 @@ impl SequenceSpec {
 
     fn check(&self) -> anyhow::Result<()> {
         ensure!(!self.methods.is_empty(), "the sequence names no method");
-        ensure!(
-            !self.frame_steps.is_empty() && self.frame_steps.iter().all(|&n| n >= 1),
-            "frame_steps must be a non-empty list of N >= 1"
-        );
-        let mut steps = self.frame_steps.clone();
-        steps.sort_unstable();
-        if let Some(w) = steps.windows(2).find(|w| w[0] == w[1]) {
-            bail!("frame_steps lists {} twice", w[0]);
-        }
-        let frames = self.trajectory.frames;
-        if let Some(n) = steps.iter().find(|&&n| n >= frames) {
-            bail!(
-                "frame_steps: 1 frame in {n} of a {frames}-frame trajectory tracks one frame \
-                 (N must be below the frame count)"
-            );
-        }
+        crate::check_frame_steps(&self.frame_steps, self.trajectory.frames)?;
         ensure!(
             self.lost_threshold_m > 0.0 && self.lost_threshold_m.is_finite(),
             "lost_threshold_m must be > 0"

@@ -286,7 +286,7 @@ fn real_benchmark_tracking_settings_are_checked() {
         (
             "frame_steps = [1, 2, 5, 10]",
             "frame_steps = [1, 100]",
-            "below the 100",
+            "1 frame in 100 of 100 frames",
         ),
         (
             "predictions = [\"last\", \"constant_velocity\"]",

@@ -282,25 +282,13 @@ impl RealSpec {
             );
         }
         if let Some(tracking) = &self.tracking {
-            crate::parse_frames(&tracking.frames).context("tracking.frames")?;
-            ensure!(
-                !tracking.frame_steps.is_empty() && tracking.frame_steps.iter().all(|&n| n >= 1),
-                "tracking.frame_steps must be >= 1"
-            );
+            let frames = crate::parse_frames(&tracking.frames)
+                .context("tracking.frames")?
+                .len();
+            crate::check_frame_steps(&tracking.frame_steps, frames).context("tracking")?;
             for m in &tracking.methods {
                 BenchMethod::parse(m)?;
             }
-            let frames = crate::parse_frames(&tracking.frames)?.len();
-            let mut steps = tracking.frame_steps.clone();
-            steps.sort_unstable();
-            ensure!(
-                steps.windows(2).all(|w| w[0] != w[1]),
-                "tracking.frame_steps lists an N twice"
-            );
-            ensure!(
-                steps.iter().all(|&n| n < frames),
-                "tracking.frame_steps: every N must be below the {frames} tracked frames"
-            );
             let mut predictions = tracking.predictions.clone();
             predictions.sort_by_key(|p| *p as u8);
             ensure!(
