@@ -262,6 +262,7 @@ pub const RESULT_FILES: &[&str] = &[
     "tracking.csv",
     "tracking.png",
     "tracking.svg",
+    "poses.csv",
     INCOMPLETE_MARKER,
 ];
 

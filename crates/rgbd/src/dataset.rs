@@ -271,6 +271,26 @@ fn read_pose_lines(path: &Path) -> Result<Vec<Isometry3>, RgbdError> {
         .collect()
 }
 
+/// A picture of its camera's size, or the error that says it is not.
+fn check_size(
+    what: &'static str,
+    path: PathBuf,
+    got: (u32, u32),
+    camera: &Camera,
+) -> Result<(), RgbdError> {
+    if got == (camera.width(), camera.height()) {
+        return Ok(());
+    }
+    Err(RgbdError::Size {
+        what,
+        path,
+        got_width: got.0,
+        got_height: got.1,
+        width: camera.width(),
+        height: camera.height(),
+    })
+}
+
 impl RgbdDataset {
     /// Read a dataset description (`description`, TOML) of the frames under
     /// `data_dir`, with every pose (checked now, so that a bad pose file fails before
@@ -424,36 +444,29 @@ impl RgbdDataset {
 
     /// Read a frame's depth and colour pictures, checked against the sensor's sizes.
     pub fn read(&self, frame: u64) -> Result<(DepthImage, ColorImage), RgbdError> {
-        let depth_path = self.depth_path(frame)?;
+        let depth = self.read_depth(frame)?;
         let color_path = self.color_path(frame)?;
-        let depth = DepthImage::load(&depth_path, self.depth_scale_m, &self.invalid_depth)?;
         let color = ColorImage::load(&color_path)?;
-        for (what, path, got, camera) in [
-            (
-                "depth picture",
-                depth_path,
-                (depth.width(), depth.height()),
-                &self.sensor.depth_camera,
-            ),
-            (
-                "colour picture",
-                color_path,
-                (color.width(), color.height()),
-                &self.sensor.color_camera,
-            ),
-        ] {
-            if got != (camera.width(), camera.height()) {
-                return Err(RgbdError::Size {
-                    what,
-                    path,
-                    got_width: got.0,
-                    got_height: got.1,
-                    width: camera.width(),
-                    height: camera.height(),
-                });
-            }
-        }
+        check_size(
+            "colour picture",
+            color_path,
+            (color.width(), color.height()),
+            &self.sensor.color_camera,
+        )?;
         Ok((depth, color))
+    }
+
+    /// Read a frame's depth picture, checked against the depth camera's size.
+    pub fn read_depth(&self, frame: u64) -> Result<DepthImage, RgbdError> {
+        let depth_path = self.depth_path(frame)?;
+        let depth = DepthImage::load(&depth_path, self.depth_scale_m, &self.invalid_depth)?;
+        check_size(
+            "depth picture",
+            depth_path,
+            (depth.width(), depth.height()),
+            &self.sensor.depth_camera,
+        )?;
+        Ok(depth)
     }
 }
 

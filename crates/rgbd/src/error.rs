@@ -110,6 +110,24 @@ pub enum RgbdError {
         /// Voxels seen by fewer frames.
         voxels: usize,
     },
+    /// No query point falls near a target surface.
+    #[error("none of the {points} query points falls near any of the {surfaces} surfaces")]
+    NoOverlap {
+        /// Query points with a normal.
+        points: usize,
+        /// Target surfaces.
+        surfaces: usize,
+    },
+    /// The paired surfaces leave a direction of the pose free (a single plane, say).
+    #[error(
+        "the {pairs} pairs do not constrain every direction of the pose (eigenvalue ratio {ratio:.1e})"
+    )]
+    Degenerate {
+        /// Pairs of the last pass.
+        pairs: usize,
+        /// Smallest over largest eigenvalue of the normal equations.
+        ratio: f64,
+    },
     /// A camera could not be read or used.
     #[error(transparent)]
     Camera(#[from] ucm::UcmError),

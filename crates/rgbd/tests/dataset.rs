@@ -343,3 +343,35 @@ fn the_house_pictures_fuse_into_a_room() {
         "{size:?}"
     );
 }
+
+/// Neighbouring house pictures agree by depth: picture 4 aligned to picture 5 moves by
+/// about a centimetre and fits it better; to picture 1, 2 m away along the corridor, it
+/// moves by an order more (the SLAM poses disagree there).
+#[test]
+fn the_house_pictures_align_to_their_neighbours_by_depth() {
+    let Some(data) = test_support::data_dir() else {
+        return;
+    };
+    let root = test_support::workspace_root();
+    let dataset = RgbdDataset::load(
+        root.join("fixtures/real/house.toml"),
+        data.join("rgbd/house"),
+    )
+    .unwrap();
+    let camera = &dataset.sensor().depth_camera;
+    let options = rgbd::AlignOptions::default();
+    let surface = |f| {
+        let depth = dataset.read_depth(f).unwrap();
+        rgbd::Surface::new(&depth, camera, &dataset.world_from_depth(f).unwrap(), 0.03).unwrap()
+    };
+    let query = dataset.read_depth(4).unwrap();
+    let truth = dataset.world_from_depth(4).unwrap();
+    let near = rgbd::align_depth(&query, camera, &truth, &[surface(5)], &options).unwrap();
+    let (moved_m, _) = near.world_from_depth.distance_to(&truth);
+    assert!(moved_m < 0.03, "{near:?}");
+    assert!(near.rms_after_m <= near.rms_before_m, "{near:?}");
+    assert!(near.pairs_after >= near.pairs_before, "{near:?}");
+    let far = rgbd::align_depth(&query, camera, &truth, &[surface(1)], &options).unwrap();
+    let (far_m, _) = far.world_from_depth.distance_to(&truth);
+    assert!(far_m > 3.0 * moved_m, "{far:?} vs {near:?}");
+}

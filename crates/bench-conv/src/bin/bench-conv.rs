@@ -540,11 +540,10 @@ fn main() -> anyhow::Result<()> {
                 data.display()
             );
             let _lock = bench_conv::report::begin_results(&out, force)?;
-            let (prepared, records, tracks) = bench_conv::real::run_benchmark(spec, &data)?;
+            let (prepared, results) = bench_conv::real::run_benchmark(spec, &data)?;
             let summary = bench_conv::real::write_results(
                 &prepared,
-                &records,
-                &tracks,
+                &results,
                 started.elapsed().as_secs_f64(),
                 &out,
             )?;

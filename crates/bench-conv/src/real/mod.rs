@@ -60,5 +60,8 @@ mod run;
 mod spec;
 
 pub use report::write_results;
-pub use run::{Benchmark, Query, QueryKind, RunRecord, TrackRecord, run_benchmark};
-pub use spec::{BenchMethod, RealSpec, Split};
+pub use run::{
+    Benchmark, PoseCheckRecord, Query, QueryKind, RealResults, RunRecord, TrackRecord,
+    run_benchmark,
+};
+pub use spec::{BenchMethod, LocalMapSpec, PoseCheckSpec, RealSpec, Split};

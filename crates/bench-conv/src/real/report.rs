@@ -10,7 +10,7 @@ use frame::Frame;
 use splat::{RenderOptions, Renderer};
 use ucm::Isometry3;
 
-use super::run::{Benchmark, QueryKind, RunRecord, TrackRecord};
+use super::run::{Benchmark, PoseCheckRecord, QueryKind, RealResults, RunRecord, TrackRecord};
 use crate::report::write_atomically;
 
 /// Write a serialisable table as CSV, atomically.
@@ -134,6 +134,59 @@ fn tracking_table(text: &mut String, tracks: &[TrackRecord], threshold_m: f64) {
             100.0 * largest,
             median(frames.iter().map(|t| t.error_deg).collect()),
             median(frames.iter().map(|t| t.time_s).collect()),
+        );
+    }
+}
+
+/// `[pose_check]`: per query, its depth aligned to its nearest frame, the frame that
+/// moves it most, and its nearest frames together.
+fn pose_check_table(text: &mut String, poses: &[PoseCheckRecord]) {
+    let cell = |r: &PoseCheckRecord| match (r.correction_m, r.correction_deg) {
+        (Some(m), Some(deg)) => format!("{:.1} cm, {deg:.2}°", 100.0 * m),
+        _ => format!("failed: {}", r.failure),
+    };
+    let rms = |r: &PoseCheckRecord| match (r.rms_before_mm, r.rms_after_mm) {
+        (Some(a), Some(b)) => format!("{a:.1} → {b:.1} mm"),
+        _ => "—".into(),
+    };
+    let together = poses.iter().find(|r| r.frames > 1).map_or(0, |r| r.frames);
+    let _ = writeln!(
+        text,
+        "| query | its nearest frame: correction | RMS at the truth → aligned | the frame that moves it most: correction | that frame's distance | {together} nearest together: correction | RMS at the truth → aligned |\n|---:|---|---|---|---:|---|---|"
+    );
+    let mut queries: Vec<u64> = Vec::new();
+    for r in poses {
+        if !queries.contains(&r.query) {
+            queries.push(r.query);
+        }
+    }
+    for q in queries {
+        let rows: Vec<&PoseCheckRecord> = poses.iter().filter(|r| r.query == q).collect();
+        let singles: Vec<&&PoseCheckRecord> = rows.iter().filter(|r| r.frames == 1).collect();
+        let Some(nearest) = singles.first() else {
+            continue;
+        };
+        let most = singles
+            .iter()
+            .max_by(|a, b| {
+                a.correction_m
+                    .unwrap_or(f64::INFINITY)
+                    .total_cmp(&b.correction_m.unwrap_or(f64::INFINITY))
+            })
+            .expect("one frame at least");
+        let all = rows.iter().find(|r| r.frames > 1);
+        let _ = writeln!(
+            text,
+            "| {q} | {} ({}) | {} | {} ({}) | {:.2} m, {:.1}° | {} | {} |",
+            cell(nearest),
+            nearest.against,
+            rms(nearest),
+            cell(most),
+            most.against,
+            most.distance_m,
+            most.angle_deg,
+            all.map_or("—".into(), |r| cell(r)),
+            all.map_or("—".into(), |r| rms(r)),
         );
     }
 }
@@ -269,12 +322,13 @@ fn plot_tracks(tracks: &[TrackRecord], png: &Path, svg: &Path) -> anyhow::Result
 /// Write every result of a benchmark under `out` and return the summary.
 pub fn write_results(
     benchmark: &Benchmark,
-    records: &[RunRecord],
-    tracks: &[TrackRecord],
+    results: &RealResults,
     wall_time_s: f64,
     out: &Path,
 ) -> anyhow::Result<String> {
     let spec = &benchmark.spec;
+    let records = &results.runs;
+    let tracks = &results.tracks;
     write_table(&out.join("runs.csv"), records)?;
     plot_errors(
         records,
@@ -324,6 +378,14 @@ pub fn write_results(
             q.nearest.3
         );
     }
+    if !results.poses.is_empty() {
+        write_table(&out.join("poses.csv"), &results.poses)?;
+        let _ = writeln!(
+            text,
+            "\n## The dataset's poses, by geometry alone\n\nEach query's depth picture aligned from its truth to the depth pictures of its cloud's nearest frames, each alone and all together (point-to-plane ICP, `rgbd::align_depth`; colour plays no part). *Correction*: how far the alignment moves the query's colour camera from its truth. Where a frame moves it by centimetres, that frame's pose and the query's disagree by as much, and a cloud fused with that frame places the query's surfaces elsewhere than its truth does (`poses.csv`).\n"
+        );
+        pose_check_table(&mut text, &results.poses);
+    }
     for camera in ordered(records, |r| &r.camera) {
         let runs: Vec<&RunRecord> = records.iter().filter(|r| r.camera == camera).collect();
         let _ = writeln!(text, "\n## Localisation, {camera} pictures\n");
@@ -363,11 +425,16 @@ pub fn write_results(
     }
     let _ = writeln!(
         text,
-        "\n`pictures/<frame>.png`: the picture, the rendering at the localiser's estimate from the first start off the truth, and both superimposed (picture red, rendering cyan). `runs.csv`, `errors.png/svg`{}.",
+        "\n`pictures/<frame>.png`: the picture, the rendering at the localiser's estimate from the first start off the truth, and both superimposed (picture red, rendering cyan). `runs.csv`, `errors.png/svg`{}{}.",
         if tracks.is_empty() {
             ""
         } else {
             ", `tracking.csv`, `tracking.png/svg`"
+        },
+        if results.poses.is_empty() {
+            ""
+        } else {
+            ", `poses.csv`"
         }
     );
     write_atomically(&out.join("summary.md"), text.as_bytes())?;

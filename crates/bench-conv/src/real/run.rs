@@ -150,6 +150,49 @@ pub struct TrackRecord {
     pub lost: bool,
 }
 
+/// One depth alignment of a query's depth picture (`[pose_check]`, `rgbd::align_depth`)
+/// against one of its cloud's frames or several together, started at its truth.
+#[derive(Clone, Debug, Serialize)]
+pub struct PoseCheckRecord {
+    /// The query's frame.
+    pub query: u64,
+    /// `frame N`, or `N nearest frames`.
+    pub against: String,
+    /// How many frames.
+    pub frames: usize,
+    /// The (farthest) frame's distance to the query's truth, metres…
+    pub distance_m: f64,
+    /// … and angle, degrees.
+    pub angle_deg: f64,
+    /// How far the alignment moved the query's colour camera from its truth, metres…
+    pub correction_m: Option<f64>,
+    /// … and turned it, degrees (none when the alignment failed).
+    pub correction_deg: Option<f64>,
+    /// Point-to-plane RMS at the truth, millimetres…
+    pub rms_before_mm: Option<f64>,
+    /// … and at the aligned pose.
+    pub rms_after_mm: Option<f64>,
+    /// Points paired at the truth…
+    pub pairs_before: Option<usize>,
+    /// … and at the aligned pose.
+    pub pairs_after: Option<usize>,
+    /// `rgbd::DepthAlignment::conditioning`: near 0, one direction is barely held.
+    pub conditioning: Option<f64>,
+    /// Why the alignment failed, if it did.
+    pub failure: String,
+}
+
+/// Everything a benchmark measured.
+#[derive(Clone, Debug, Default)]
+pub struct RealResults {
+    /// The localisations.
+    pub runs: Vec<RunRecord>,
+    /// The tracks, frame by frame.
+    pub tracks: Vec<TrackRecord>,
+    /// The depth alignments of `[pose_check]`.
+    pub poses: Vec<PoseCheckRecord>,
+}
+
 /// One localisation to run.
 #[derive(Clone, Debug)]
 struct Job {
@@ -160,6 +203,8 @@ struct Job {
     method: Option<BenchMethod>,
     global: bool,
     reference: bool,
+    /// In a cloud of the frames nearest the start (`[local_map]`).
+    local: bool,
 }
 
 /// A unit vector of a seeded direction.
@@ -189,6 +234,25 @@ fn offset_start(
         direction(&mut rng) * r.to_radians(),
     );
     *truth * Isometry3::from_pose_vector([a.x, a.y, a.z, b.x, b.y, b.z]).expect("a finite offset")
+}
+
+/// `frames` with their colour camera's pose, distance (m) and angle (degrees) to `pose`,
+/// nearest first (a metre counts as 100°); ties in frame order.
+fn by_distance(
+    dataset: &rgbd::RgbdDataset,
+    frames: &[u64],
+    pose: &Isometry3,
+) -> anyhow::Result<Vec<(u64, Isometry3, f64, f64)>> {
+    let mut out = frames
+        .iter()
+        .map(|&f| {
+            let frame_pose = dataset.world_from_color(f)?;
+            let (t, r) = frame_pose.distance_to(pose);
+            Ok((f, frame_pose, t, r.to_degrees()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    out.sort_by(|a, b| (a.2 + a.3 / 100.0).total_cmp(&(b.2 + b.3 / 100.0)));
+    Ok(out)
 }
 
 /// The name of a start offset: `truth` or `5cm-3deg`.
@@ -284,16 +348,9 @@ impl Benchmark {
             eprintln!("{} points ({} voxels)", report.points, report.voxels);
             for (frame, kind) in cloud_queries {
                 let truth = dataset.world_from_color(frame)?;
-                let nearest = frames
-                    .iter()
-                    .map(|&f| {
-                        let pose = dataset.world_from_color(f)?;
-                        let (t, r) = pose.distance_to(&truth);
-                        Ok((f, pose, t, r.to_degrees()))
-                    })
-                    .collect::<anyhow::Result<Vec<_>>>()?
+                let nearest = by_distance(&dataset, &frames, &truth)?
                     .into_iter()
-                    .min_by(|a, b| (a.2 + a.3 / 100.0).total_cmp(&(b.2 + b.3 / 100.0)))
+                    .next()
                     .context("a cloud without frames")?;
                 queries.push(Query {
                     frame,
@@ -362,6 +419,7 @@ impl Benchmark {
                         method: None,
                         global: false,
                         reference: true,
+                        local: false,
                     });
                 }
                 let mut starts: Vec<(String, Isometry3)> = spec
@@ -389,7 +447,24 @@ impl Benchmark {
                             method: Some(*m),
                             global: false,
                             reference: false,
+                            local: false,
                         });
+                    }
+                }
+                if let (Some(local), false) = (&spec.local_map, catadioptric) {
+                    for (name, initial) in &starts {
+                        for m in &local.methods {
+                            jobs.push(Job {
+                                query: qi,
+                                catadioptric,
+                                start: name.clone(),
+                                initial: *initial,
+                                method: Some(BenchMethod::parse(m)?),
+                                global: false,
+                                reference: false,
+                                local: true,
+                            });
+                        }
                     }
                 }
                 if spec.global.is_some() && !catadioptric {
@@ -409,6 +484,7 @@ impl Benchmark {
                             method: None,
                             global: true,
                             reference: false,
+                            local: false,
                         });
                     }
                 }
@@ -449,6 +525,26 @@ impl Benchmark {
             return Ok((outcome, "global".into()));
         }
         let method = job.method.expect("a method");
+        if job.local {
+            let local = self.spec.local_map.as_ref().expect("local map settings");
+            let frames: Vec<u64> =
+                by_distance(&self.dataset, &self.cloud_frames[q.cloud], &job.initial)?
+                    .into_iter()
+                    .take(local.frames)
+                    .map(|(f, ..)| f)
+                    .collect();
+            let options = rgbd::FuseOptions {
+                min_frames: self.spec.fuse.min_frames.min(frames.len() as u32),
+                ..self.spec.fuse
+            };
+            let (cloud, _) = self.dataset.fuse(&frames, options, |_, _| {})?;
+            let outcome = Servo::new(&cloud, camera, method.config())?.run(
+                method.method,
+                picture,
+                job.initial,
+            )?;
+            return Ok((outcome, format!("{}@local{}", method.name(), local.frames)));
+        }
         let outcome =
             Servo::new(cloud, camera, method.config())?.run(method.method, picture, job.initial)?;
         Ok((outcome, method.name()))
@@ -523,7 +619,7 @@ impl Benchmark {
                 Ok((r.query, r.camera.clone(), pose))
             })
             .collect::<anyhow::Result<_>>()?;
-        for record in &mut records {
+        for record in records.iter_mut().filter(|r| !r.method.contains("@local")) {
             if let Some((_, _, reference)) = references
                 .iter()
                 .find(|(q, c, _)| *q == record.query && *c == record.camera)
@@ -537,6 +633,96 @@ impl Benchmark {
             }
         }
         Ok(records)
+    }
+
+    /// `[pose_check]`: each query's depth picture aligned, from its truth, to each of
+    /// its cloud's nearest frames alone and to them together (`rgbd::align_depth`).
+    /// Queries one after the other (memory: the frames' surfaces of one query), the
+    /// alignments of a query in parallel.
+    pub fn check_poses(&self) -> anyhow::Result<Vec<PoseCheckRecord>> {
+        let Some(check) = &self.spec.pose_check else {
+            return Ok(Vec::new());
+        };
+        let sensor = self.dataset.sensor();
+        let depth_camera = &sensor.depth_camera;
+        let options = rgbd::AlignOptions::default();
+        eprintln!(
+            "aligning each query's depth to its {} nearest frames'",
+            check.frames
+        );
+        let progress = Progress::new(self.queries.len() as u64, "queries");
+        let mut out = Vec::new();
+        for q in &self.queries {
+            let mut near = by_distance(&self.dataset, &self.cloud_frames[q.cloud], &q.truth)?;
+            near.truncate(check.frames);
+            let surfaces = near
+                .par_iter()
+                .map(|&(f, ..)| {
+                    let depth = self.dataset.read_depth(f)?;
+                    Ok(rgbd::Surface::new(
+                        &depth,
+                        depth_camera,
+                        &self.dataset.world_from_depth(f)?,
+                        options.max_depth_jump,
+                    )?)
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let depth = self.dataset.read_depth(q.frame)?;
+            let start = self.dataset.world_from_depth(q.frame)?;
+            let mut targets: Vec<(String, &[rgbd::Surface], f64, f64)> = near
+                .iter()
+                .zip(surfaces.chunks(1))
+                .map(|(&(f, _, t, r), one)| (format!("frame {f}"), one, t, r))
+                .collect();
+            if near.len() > 1 {
+                targets.push((
+                    format!("{} nearest frames", near.len()),
+                    &surfaces,
+                    near.iter().map(|n| n.2).fold(0.0, f64::max),
+                    near.iter().map(|n| n.3).fold(0.0, f64::max),
+                ));
+            }
+            let rows: Vec<PoseCheckRecord> = targets
+                .par_iter()
+                .map(|(against, targets, distance_m, angle_deg)| {
+                    let found = rgbd::align_depth(&depth, depth_camera, &start, targets, &options);
+                    let mut record = PoseCheckRecord {
+                        query: q.frame,
+                        against: against.clone(),
+                        frames: targets.len(),
+                        distance_m: *distance_m,
+                        angle_deg: *angle_deg,
+                        correction_m: None,
+                        correction_deg: None,
+                        rms_before_mm: None,
+                        rms_after_mm: None,
+                        pairs_before: None,
+                        pairs_after: None,
+                        conditioning: None,
+                        failure: String::new(),
+                    };
+                    match found {
+                        Ok(a) => {
+                            let aligned = sensor.world_from_color(&a.world_from_depth);
+                            let (m, rad) = aligned.distance_to(&q.truth);
+                            record.correction_m = Some(m);
+                            record.correction_deg = Some(rad.to_degrees());
+                            record.rms_before_mm = Some(1e3 * a.rms_before_m);
+                            record.rms_after_mm = Some(1e3 * a.rms_after_m);
+                            record.pairs_before = Some(a.pairs_before);
+                            record.pairs_after = Some(a.pairs_after);
+                            record.conditioning = Some(a.conditioning);
+                        }
+                        Err(e) => record.failure = e.to_string(),
+                    }
+                    record
+                })
+                .collect();
+            out.extend(rows);
+            progress.inc(1, "");
+        }
+        progress.finish();
+        Ok(out)
     }
 
     /// Every track of `[tracking]`, frame after frame, with progress.
@@ -646,13 +832,18 @@ fn load_picture(
     })
 }
 
-/// Prepare and run a benchmark: its localisations and its tracks.
-pub fn run_benchmark(
-    spec: RealSpec,
-    data: &Path,
-) -> anyhow::Result<(Benchmark, Vec<RunRecord>, Vec<TrackRecord>)> {
+/// Prepare and run a benchmark: its pose check, its localisations and its tracks.
+pub fn run_benchmark(spec: RealSpec, data: &Path) -> anyhow::Result<(Benchmark, RealResults)> {
     let benchmark = Benchmark::prepare(spec, data)?;
-    let records = benchmark.localize()?;
+    let poses = benchmark.check_poses()?;
+    let runs = benchmark.localize()?;
     let tracks = benchmark.track()?;
-    Ok((benchmark, records, tracks))
+    Ok((
+        benchmark,
+        RealResults {
+            runs,
+            tracks,
+            poses,
+        },
+    ))
 }

@@ -44,6 +44,13 @@ pub struct RealSpec {
     /// The queries resampled to a catadioptric camera.
     #[serde(default)]
     pub catadioptric: Option<CatadioptricSpec>,
+    /// Each query's depth picture aligned to its cloud's nearest frames' (geometry
+    /// alone): how well the dataset's poses agree with each other.
+    #[serde(default)]
+    pub pose_check: Option<PoseCheckSpec>,
+    /// Each query also localised in a cloud of the map frames nearest its start.
+    #[serde(default)]
+    pub local_map: Option<LocalMapSpec>,
     /// The benchmark file's folder.
     #[serde(skip)]
     pub base_dir: PathBuf,
@@ -148,6 +155,29 @@ pub struct CatadioptricSpec {
     /// Methods run on the resampled queries.
     pub methods: Vec<String>,
 }
+
+/// The depth alignment of each query (`rgbd::align_depth`) against each of its cloud's
+/// `frames` nearest frames alone and against them together.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseCheckSpec {
+    /// How many of the cloud's frames nearest the query (at most 32).
+    pub frames: usize,
+}
+
+/// Each query localised, from every start, in a cloud fused from the `frames` frames of
+/// its cloud nearest that start (a keyframe map around the guess).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalMapSpec {
+    /// How many frames (at most 32).
+    pub frames: usize,
+    /// Methods run in the local clouds; their runs are named `method@localN`.
+    pub methods: Vec<String>,
+}
+
+/// The most frames a pose check or a local map takes.
+pub const MAX_LOCAL_FRAMES: usize = 32;
 
 /// A method of the benchmark: a rule, a Jacobian, the comparison.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -295,6 +325,24 @@ impl RealSpec {
                 !predictions.is_empty() && predictions.windows(2).all(|w| w[0] != w[1]),
                 "tracking.predictions must list each prediction once"
             );
+        }
+        if let Some(check) = &self.pose_check {
+            ensure!(
+                (1..=MAX_LOCAL_FRAMES).contains(&check.frames),
+                "pose_check.frames must be in 1..={MAX_LOCAL_FRAMES}, got {}",
+                check.frames
+            );
+        }
+        if let Some(local) = &self.local_map {
+            ensure!(
+                (1..=MAX_LOCAL_FRAMES).contains(&local.frames),
+                "local_map.frames must be in 1..={MAX_LOCAL_FRAMES}, got {}",
+                local.frames
+            );
+            ensure!(!local.methods.is_empty(), "local_map.methods is empty");
+            for m in &local.methods {
+                BenchMethod::parse(m)?;
+            }
         }
         if let Some(c) = &self.catadioptric {
             ensure!(
