@@ -116,6 +116,19 @@ fn readme_names_the_test_command_ci_runs() {
     assert!(ci.contains(command), ".ci/run must run `{command}`");
 }
 
+/// The documents report rather than narrate: docs/RESULTS.md says where each experiment
+/// stands (its newest figures, not their history) and README.md is a newcomer's page.
+#[test]
+fn results_and_readme_stay_short() {
+    for (file, max_lines) in [("docs/RESULTS.md", 600), ("README.md", 150)] {
+        let lines = read(&project_root().join(file)).lines().count();
+        assert!(
+            lines <= max_lines,
+            "{file} has {lines} lines, more than {max_lines}: condense it"
+        );
+    }
+}
+
 /// A crate depends only on what its concept needs: the pictures and the features never
 /// see the renderer, LAS/LAZ or the synthetic world (not even in their tests), the
 /// renderer never sees a feature, and xtask links none of the project's heavy crates.

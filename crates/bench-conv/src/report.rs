@@ -75,6 +75,10 @@ pub const MANIFEST: &str = "run.toml";
 pub struct RunManifest {
     /// The protocol's name.
     pub protocol: String,
+    /// A fingerprint of the protocol file's bytes ([`fingerprint`]): two protocol
+    /// files of one name are told apart.
+    #[serde(default)]
+    pub protocol_hash: Option<String>,
     /// Whether its extra methods ran.
     pub extras: bool,
     /// Runs of the whole protocol (every shard).
@@ -83,6 +87,39 @@ pub struct RunManifest {
     pub shard: Option<[usize; 2]>,
     /// Rows of the `runs.csv` beside it.
     pub runs: usize,
+}
+
+/// A 64-bit FNV-1a fingerprint of `bytes`, as 16 hexadecimal digits (to tell files
+/// apart, not to resist anyone).
+pub fn fingerprint(bytes: &[u8]) -> String {
+    let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    });
+    format!("{hash:016x}")
+}
+
+/// Every merged run is a run of the protocol its manifests describe: a run id at or
+/// past their run count is an error (known only when every CSV has its manifest).
+pub fn check_run_ids(
+    records: &[RunRecord],
+    manifests: &[Option<RunManifest>],
+) -> anyhow::Result<()> {
+    let Some(Some(first)) = manifests.first() else {
+        return Ok(());
+    };
+    if manifests.iter().any(Option::is_none) {
+        return Ok(());
+    }
+    if let Some(r) = records.iter().find(|r| r.run_id >= first.total_runs) {
+        bail!(
+            "run {} is not a run of protocol `{}`, which has {} runs (ids 0 to {})",
+            r.run_id,
+            first.protocol,
+            first.total_runs,
+            first.total_runs.saturating_sub(1)
+        );
+    }
+    Ok(())
 }
 
 /// Write the manifest of the results folder `out`.
@@ -195,6 +232,15 @@ pub fn completeness(
     }
     let mut seen = vec![false; count];
     for m in &all {
+        if let (Some(a), Some(b)) = (&first.protocol_hash, &m.protocol_hash)
+            && a != b
+        {
+            bail!(
+                "the CSV files come from two different protocol files, both named `{}` \
+                 (fingerprints {a} and {b})",
+                m.protocol
+            );
+        }
         if (&m.protocol, m.extras, m.total_runs)
             != (&first.protocol, first.extras, first.total_runs)
             || m.shard.map_or(1, |[_, n]| n) != count

@@ -175,16 +175,70 @@ proptest! {
         }
     }
 
-    /// Mei calibrations (omniunwarp YAML), with a crop size drawn too.
+    /// Mei calibrations (omniunwarp YAML) in every layout the reader takes — flow
+    /// lists, block lists, OpenCV matrices, a non-ASCII comment — with LF or CRLF line
+    /// ends, mutated as text or as bytes, with a crop size drawn too.
     #[test]
-    fn mei_yaml(seed in any::<u64>(), width in 0u32..5000, height in 0u32..5000) {
+    fn mei_yaml(
+        seed in any::<u64>(),
+        layout in 0usize..4,
+        crlf in any::<bool>(),
+        bytes in any::<bool>(),
+        width in 0u32..5000,
+        height in 0u32..5000,
+    ) {
         let dir = temp("mei");
-        let text = "# Intrinsic Matrix\nK: [470.0, 0.9, 615.0,\n    0.0, 463.0, 518.0,\n    \
-                    0.0, 0.0, 1.0\n]\nD: [-0.15, 0.67, -0.02, -0.005]\nXi: [1.5]\n";
+        let text = match layout {
+            0 => "# Intrinsic Matrix\nK: [470.0, 0.9, 615.0,\n    0.0, 463.0, 518.0,\n    \
+                  0.0, 0.0, 1.0\n]\nD: [-0.15, 0.67, -0.02, -0.005]\nXi: [1.5]\n",
+            1 => "K:\n  - 470.0\n  - 0.9\n  - 615.0\n  - 0.0\n  - 463.0\n  - 518.0\n  - 0.0\n  \
+                  - 0.0\n  - 1.0\nD:\n  - -0.15\n  - 0.67\n  - -0.02\n  - -0.005\nXi: 1.5\n",
+            2 => "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   \
+                  data: [470.0, 0.9, 615.0, 0.0, 463.0, 518.0, 0.0, 0.0, 1.0]\nD: !!opencv-matrix\n   \
+                  rows: 1\n   cols: 4\n   dt: d\n   data: [-0.15, 0.67, -0.02, -0.005]\nXi: [1.5]\n",
+            _ => "# Étalonnage — caméra catadioptrique, D = [0, 0, 0, 0] avant correction\n\
+                  K: [470.0, 0.9, 615.0, 0.0, 463.0, 518.0, 0.0, 0.0, 1.0]\n\
+                  D: [-0.15, 0.67, -0.02, -0.005] # après\nXi: [1.5]\n",
+        };
+        let text = if crlf { text.replace('\n', "\r\n") } else { text.to_string() };
+        let mutated = if bytes {
+            mutate_bytes(text.as_bytes(), seed)
+        } else {
+            mutate_text(&text, seed).into_bytes()
+        };
         let path = dir.join(format!("m-{seed}.yaml"));
-        std::fs::write(&path, mutate_text(text, seed)).unwrap();
+        std::fs::write(&path, mutated).unwrap();
         let _ = ucm::Camera::load_mei_yaml(&path, width, height, ucm::ValidRegion::Full);
         std::fs::remove_file(&path).unwrap();
+    }
+
+    /// The manifest (`run.toml`) beside a shard's CSV, as `merge` reads it, and the
+    /// completeness of merges of it with a valid shard.
+    #[test]
+    fn run_manifest(seed in any::<u64>(), bytes in any::<bool>()) {
+        let dir = temp(&format!("manifest-{seed}"));
+        let valid = bench_conv::report::RunManifest {
+            protocol: "fig3".into(),
+            protocol_hash: Some(bench_conv::report::fingerprint(b"fig3")),
+            extras: false,
+            total_runs: 10,
+            shard: Some([1, 3]),
+            runs: 3,
+        };
+        bench_conv::report::write_manifest(&dir, &valid).unwrap();
+        let path = dir.join(bench_conv::report::MANIFEST);
+        let text = std::fs::read(&path).unwrap();
+        let mutated = if bytes {
+            mutate_bytes(&text, seed)
+        } else {
+            mutate_text(&String::from_utf8_lossy(&text), seed).into_bytes()
+        };
+        std::fs::write(&path, mutated).unwrap();
+        if let Ok(manifest) = bench_conv::report::read_manifest(&dir.join("runs.csv")) {
+            let first = Some(bench_conv::report::RunManifest { shard: Some([0, 3]), runs: 4, ..valid });
+            let _ = bench_conv::report::completeness(&[first, manifest], 7);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Protocol and sequence files (every fixture): parsed and checked, never run.
@@ -216,24 +270,7 @@ proptest! {
     #[test]
     fn runs_csv(seed in any::<u64>(), bytes in any::<bool>()) {
         let dir = temp("csv");
-        let record = |id: usize| bench_conv::report::RunRecord {
-            run_id: id,
-            scene: "city-1".into(),
-            desired: 0,
-            offset_scale: 1.0,
-            initial: id,
-            config: "rule2/convolved".into(),
-            method: vvs::Method::Rule2,
-            final_position_error_m: 0.01 * id as f64,
-            final_rotation_error_deg: 0.1,
-            iterations_step1: 10,
-            iterations_step2: 20,
-            stop: vvs::StopReason::Stalled,
-            lambda: 1.0,
-            cost: 0.5,
-            wall_time_s: 1.0,
-            success: id == 0,
-        };
+        let record = |id: usize| crate::protocol::sample_record(id, id == 0);
         let valid = dir.join(format!("v-{seed}.csv"));
         bench_conv::report::write_csv(&valid, &[record(0), record(1), record(2)]).unwrap();
         let text = std::fs::read(&valid).unwrap();
@@ -266,6 +303,12 @@ proptest! {
         let camera =
             ucm::Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap();
         let _ = frame::Image::load(&path, &camera, Some([x, y, 320, 240]));
+        // Cut anywhere before its end, a picture is refused (a JPEG's grey fill and a
+        // PNG's missing rows are no picture).
+        let cut = (seed % bytes.len() as u64) as usize;
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        let truncated = frame::Image::load(&path, &camera, Some([x, y, 320, 240]));
+        prop_assert!(truncated.is_err(), "{name} cut at {cut} of {} bytes was read", bytes.len());
         std::fs::remove_file(&path).unwrap();
         std::fs::remove_file(&valid).unwrap();
     }

@@ -755,11 +755,13 @@ fn pixel_counts_parse_strictly() {
 #[test]
 fn merges_know_whether_they_are_complete() {
     use bench_conv::report::{
-        Completeness, RunManifest, completeness, read_manifest, write_manifest,
+        Completeness, RunManifest, check_run_ids, completeness, fingerprint, read_manifest,
+        write_manifest,
     };
     let shard = |i: usize, runs: usize| {
         Some(RunManifest {
             protocol: "fig3".into(),
+            protocol_hash: Some(fingerprint(b"name = \"fig3\"")),
             extras: false,
             total_runs: 10,
             shard: Some([i, 3]),
@@ -799,6 +801,23 @@ fn merges_know_whether_they_are_complete() {
         completeness(&[shard(0, 4), None], 7).unwrap(),
         Completeness::Unknown
     );
+    // Two protocol files of one name: told apart by their fingerprint.
+    let mut edited = shard(1, 3);
+    if let Some(m) = &mut edited {
+        m.protocol_hash = Some(fingerprint(b"name = \"fig3\"\nseed = 2"));
+    }
+    let two = format!("{:#}", completeness(&[shard(0, 4), edited], 7).unwrap_err());
+    assert!(two.contains("two different protocol files"), "{two}");
+    // A run id past the protocol's 10 runs.
+    let record = |run_id: usize| sample_record(run_id, true);
+    let manifests = [shard(0, 4), shard(1, 3), shard(2, 3)];
+    check_run_ids(&[record(0), record(9)], &manifests).unwrap();
+    let past = format!(
+        "{:#}",
+        check_run_ids(&[record(0), record(10)], &manifests).unwrap_err()
+    );
+    assert!(past.contains("run 10 is not a run"), "{past}");
+    check_run_ids(&[record(10)], &[shard(0, 4), None]).unwrap();
     // Through the file beside a runs.csv.
     let dir = temp("manifest");
     write_manifest(&dir, shard(2, 3).as_ref().unwrap()).unwrap();
@@ -885,5 +904,27 @@ lambda_schedule = [7.5, 3.0]
             "start {}: {} m, {}°",
             r.initial, r.final_position_error_m, r.final_rotation_error_deg
         );
+    }
+}
+
+/// A run record of a protocol run `run_id` (the tests' and fuzzers' sample).
+pub fn sample_record(run_id: usize, success: bool) -> bench_conv::report::RunRecord {
+    bench_conv::report::RunRecord {
+        run_id,
+        scene: "city-1".into(),
+        desired: 0,
+        offset_scale: 1.0,
+        initial: run_id,
+        config: "rule2/convolved".into(),
+        method: vvs::Method::Rule2,
+        final_position_error_m: 0.01 * run_id as f64,
+        final_rotation_error_deg: 0.1,
+        iterations_step1: 10,
+        iterations_step2: 20,
+        stop: vvs::StopReason::Stalled,
+        lambda: 1.0,
+        cost: 0.5,
+        wall_time_s: 1.0,
+        success,
     }
 }

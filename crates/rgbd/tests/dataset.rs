@@ -312,17 +312,24 @@ fn bad_descriptions_and_pose_files_are_typed_errors() {
     ));
 }
 
+/// The house of the shared data (`PGM_DATA_DIR`), if it is there.
+fn house() -> Option<RgbdDataset> {
+    let data = test_support::data_dir()?;
+    let root = test_support::workspace_root();
+    Some(
+        RgbdDataset::load(
+            root.join("fixtures/real/house.toml"),
+            data.join("rgbd/house"),
+        )
+        .unwrap(),
+    )
+}
+
 #[test]
 fn the_house_pictures_fuse_into_a_room() {
-    let Some(data) = test_support::data_dir() else {
+    let Some(dataset) = house() else {
         return;
     };
-    let root = test_support::workspace_root();
-    let dataset = RgbdDataset::load(
-        root.join("fixtures/real/house.toml"),
-        data.join("rgbd/house"),
-    )
-    .unwrap();
     assert_eq!(dataset.frames(), [1, 5]);
     let options = FuseOptions {
         min_frames: 1,
@@ -349,15 +356,9 @@ fn the_house_pictures_fuse_into_a_room() {
 /// moves by an order more (the SLAM poses disagree there).
 #[test]
 fn the_house_pictures_align_to_their_neighbours_by_depth() {
-    let Some(data) = test_support::data_dir() else {
+    let Some(dataset) = house() else {
         return;
     };
-    let root = test_support::workspace_root();
-    let dataset = RgbdDataset::load(
-        root.join("fixtures/real/house.toml"),
-        data.join("rgbd/house"),
-    )
-    .unwrap();
     let camera = &dataset.sensor().depth_camera;
     let options = rgbd::AlignOptions::default();
     let surface = |f| {

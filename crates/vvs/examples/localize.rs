@@ -76,7 +76,20 @@ fn numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {
 
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
+    // Every argument is checked before the files are read.
+    let truth = args
+        .truth
+        .as_deref()
+        .map(|text| -> anyhow::Result<Isometry3> {
+            Ok(Isometry3::from_pose_vector(
+                numbers::<6>(text).context("--truth")?,
+            )?)
+        })
+        .transpose()?;
     let camera = match (args.camera, args.mei_yaml) {
+        (Some(_), None) if args.annulus.is_some() => {
+            bail!("--annulus applies to --mei-yaml (a --camera file states its own region)")
+        }
         (Some(path), None) => CameraFile::Toml(path),
         (None, Some(path)) => CameraFile::MeiYaml {
             path,
@@ -145,8 +158,7 @@ fn main() -> anyhow::Result<()> {
         "world_from_camera (t, θw): {:.4},{:.4},{:.4},{:.5},{:.5},{:.5}",
         r[0], r[1], r[2], r[3], r[4], r[5]
     );
-    if let Some(text) = args.truth.as_deref() {
-        let truth = Isometry3::from_pose_vector(numbers::<6>(text)?)?;
+    if let Some(truth) = truth {
         let (dt, dr) = o.world_from_camera.distance_to(&truth);
         let (t0, r0) = initial.distance_to(&truth);
         println!(
@@ -155,6 +167,10 @@ fn main() -> anyhow::Result<()> {
             dr.to_degrees(),
             r0.to_degrees()
         );
+    }
+    // A run that diverged answers nothing: say so in the exit status too.
+    if let vvs::StopReason::Diverged(why) = o.stop {
+        bail!("the localisation diverged ({why:?}): the pose printed is not an answer");
     }
     Ok(())
 }

@@ -50,6 +50,27 @@ pub enum VvsError {
     /// The initial pose is not finite.
     #[error("initial pose is not finite")]
     NonFinitePose,
+    /// At the initial pose the camera sees too little of the cloud to start (a pose far
+    /// from the cloud, looking away from it, or a camera that sees nothing).
+    #[error(
+        "at the initial pose the camera sees the cloud on fewer than {min_percent}% of its pixels: nothing to start from (is the pose in the cloud's frame, and the camera right?)"
+    )]
+    CloudNotInView {
+        /// `VvsConfig::min_hit_fraction`, in per cent.
+        min_percent: f64,
+    },
+    /// A camera with more pixels than the optimiser sets up.
+    #[error(
+        "the camera has {pixels} pixels, more than the {max} the optimiser sets up (about {bytes_per_pixel} bytes each): downsample or crop the picture"
+    )]
+    TooManyPixels {
+        /// The camera's pixels.
+        pixels: u64,
+        /// [`crate::MAX_SERVO_PIXELS`].
+        max: u64,
+        /// Set-up memory per pixel, bytes (approximate).
+        bytes_per_pixel: u64,
+    },
     /// A name (of a method, a stop reason) that names nothing.
     #[error("unknown {what} `{text}` (expected one of: {expected})")]
     UnknownName {

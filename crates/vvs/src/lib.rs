@@ -17,5 +17,5 @@ pub use global::{GlobalConfig, PriorBox, SearchReport, turned, turned_about_opti
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;
-pub use servo::Servo;
+pub use servo::{MAX_SERVO_PIXELS, SERVO_BYTES_PER_PIXEL, Servo};
 pub use track::{Prediction, Recovery, TrackReport, TrackedFrame, Tracker};

@@ -30,7 +30,9 @@ use frame::{AnyImage, Image};
 use splat::PointCloud;
 use ucm::{Camera, Isometry3};
 
-use crate::{Method, Outcome, PriorBox, Servo, Support, VvsConfig, VvsError};
+use crate::{
+    Divergence, Method, Outcome, PriorBox, Servo, StopReason, Support, VvsConfig, VvsError,
+};
 
 /// Where the camera's calibration comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -119,7 +121,9 @@ impl Default for Localizer {
 
 impl Localizer {
     /// Localise `picture`, taken by `camera`, in `cloud` from `initial`
-    /// (`world_from_camera`). Divergence is an outcome, not an error.
+    /// (`world_from_camera`). Divergence is an outcome, not an error; but a camera that
+    /// sees too little of the cloud at `initial` to take one step (without a prior box)
+    /// is [`VvsError::CloudNotInView`].
     pub fn localize<D: AnyImage + Clone>(
         &self,
         cloud: &PointCloud,
@@ -133,7 +137,18 @@ impl Localizer {
             None if self.method == Method::Global => {
                 servo.localize_in_box(picture, initial, &self.config.global.prior)
             }
-            None => servo.run(self.method, picture, initial),
+            None => {
+                let outcome = servo.run(self.method, picture, initial)?;
+                // Nothing seen before the first step: an input to fix, not a divergence.
+                if outcome.stop == StopReason::Diverged(Divergence::NoValidPixels)
+                    && outcome.iterations.iter().sum::<usize>() == 0
+                {
+                    return Err(VvsError::CloudNotInView {
+                        min_percent: 100.0 * self.config.min_hit_fraction,
+                    });
+                }
+                Ok(outcome)
+            }
         }
     }
 

@@ -114,6 +114,16 @@ impl Level {
     }
 }
 
+/// The most pixels a camera may have for [`Servo`]: its buffers (renderings, features,
+/// interaction rows, pyramid levels) take about [`SERVO_BYTES_PER_PIXEL`] bytes a pixel,
+/// so 2²² pixels (2048 × 2048) take about 0.9 GB. Larger pictures are refused
+/// ([`VvsError::TooManyPixels`]) rather than set up for minutes.
+pub const MAX_SERVO_PIXELS: u64 = 1 << 22;
+
+/// Set-up memory of [`Servo`] per camera pixel, bytes (measured: a 4096 × 4096 camera
+/// took 3.7 GB).
+pub const SERVO_BYTES_PER_PIXEL: u64 = 220;
+
 /// The optimiser for one cloud and camera, owning every buffer (no allocation per
 /// iteration once warm).
 #[derive(Debug)]
@@ -152,6 +162,14 @@ impl<'a> Servo<'a> {
         config: VvsConfig,
     ) -> Result<Self, VvsError> {
         config.validate()?;
+        let pixels = u64::from(camera.width()) * u64::from(camera.height());
+        if pixels > MAX_SERVO_PIXELS {
+            return Err(VvsError::TooManyPixels {
+                pixels,
+                max: MAX_SERVO_PIXELS,
+                bytes_per_pixel: SERVO_BYTES_PER_PIXEL,
+            });
+        }
         let mut levels = vec![Level::new(camera.clone(), &config)?];
         for k in 1..config.pyramid_levels {
             let coarse = camera.downsampled(1 << k).map_err(|e| VvsError::Config {

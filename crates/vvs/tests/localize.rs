@@ -102,6 +102,29 @@ fn localizes_a_png_in_a_laz_cloud_from_metres_away() {
     assert!(matches!(err(&no_cloud, start), VvsError::Render(_)));
     let nan = Isometry3::from_translation(DVec3::new(f64::NAN, 0.0, 0.0));
     assert!(matches!(err(&files, nan), VvsError::NonFinitePose));
+    // A start that sees nothing of the city (1 km away) is an input to fix, not a
+    // divergence.
+    let far = Isometry3::from_translation(DVec3::new(1000.0, 0.0, 3.0));
+    let message = err(&files, far).to_string();
+    assert!(
+        message.contains("sees the cloud on fewer than 2%"),
+        "{message}"
+    );
+    // A camera the optimiser would take gigabytes to set up.
+    let huge = ucm::Camera::new(
+        *camera.intrinsics(),
+        None,
+        4096,
+        2048,
+        ucm::ValidRegion::Full,
+    )
+    .unwrap();
+    match vvs::Servo::new(&city.cloud, &huge, Default::default()) {
+        Err(VvsError::TooManyPixels { pixels, max, .. }) => {
+            assert_eq!((pixels, max), (4096 * 2048, vvs::MAX_SERVO_PIXELS));
+        }
+        other => panic!("expected TooManyPixels, got {:?}", other.map(|_| ())),
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

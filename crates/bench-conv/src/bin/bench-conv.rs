@@ -297,8 +297,11 @@ fn main() -> anyhow::Result<()> {
                 Some(s) => format!("{} (shard {}/{})", protocol.name, s.index, s.count),
                 None => protocol.name.clone(),
             };
+            let protocol_bytes = std::fs::read(&protocol_path)
+                .with_context(|| format!("reading {}", protocol_path.display()))?;
             let manifest = bench_conv::report::RunManifest {
                 protocol: protocol.name.clone(),
+                protocol_hash: Some(bench_conv::report::fingerprint(&protocol_bytes)),
                 extras,
                 // An adaptive protocol needs only the runs it ran.
                 total_runs: if protocol.offsets.adaptive {
@@ -422,6 +425,7 @@ fn main() -> anyhow::Result<()> {
                 "the CSV files hold no run: nothing to merge"
             );
             let completeness = bench_conv::report::completeness(&manifests, records.len())?;
+            bench_conv::report::check_run_ids(&records, &manifests)?;
             // Success follows the threshold given here, not the one of the runs.
             bench_conv::report::apply_threshold(&mut records, threshold_m)
                 .context("--threshold-m")?;
