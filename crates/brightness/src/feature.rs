@@ -148,7 +148,7 @@ impl Brightness {
         }
         // Compiled for the widest instruction set found at run time, so that the plain
         // loops below are vectorised with it (the same operations: the same bits).
-        pulp::Arch::new().dispatch(Pixels {
+        isa::arch().dispatch(Pixels {
             brightness: self,
             picture,
         });

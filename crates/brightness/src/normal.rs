@@ -129,7 +129,7 @@ fn run<const M: usize>(
     }
     #[cfg(target_arch = "x86_64")]
     if M <= avx512::MAX_COLUMNS
-        && let Some(simd) = pulp::x86::V4::try_new()
+        && let Some(simd) = isa::avx512()
     {
         return pulp::Simd::vectorize(
             simd,

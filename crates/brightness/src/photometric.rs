@@ -73,7 +73,7 @@ pub(crate) fn rows(run: Run<'_>) {
             && run.inverse_range.len() == n
     );
     #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = pulp::x86::V4::try_new() {
+    if let Some(simd) = isa::avx512() {
         let (blocks, tail) = run.split(n / avx512::PIXELS * avx512::PIXELS);
         pulp::Simd::vectorize(simd, avx512::Rows { simd, run: blocks });
         scalar(tail);

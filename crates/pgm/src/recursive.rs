@@ -706,7 +706,7 @@ pub fn transpose_f32(src: &[f32], dst: &mut [f32], width: usize, height: usize, 
         dst.len()
     );
     #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = pulp::x86::V4::try_new() {
+    if let Some(simd) = isa::avx512() {
         // Whole blocks from the window's first row and column.
         let (c_end, r_end) = (c0 + (c1 - c0) / 16 * 16, r0 + (r1 - r0) / 16 * 16);
         pulp::Simd::vectorize(

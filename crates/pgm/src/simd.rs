@@ -22,7 +22,7 @@ pub(crate) trait Kernel: Sized {
 pub(crate) fn on_widest(kernel: impl Kernel) {
     #[cfg(target_arch = "x86_64")]
     {
-        if let Some(simd) = pulp::x86::V4::try_new() {
+        if let Some(simd) = isa::avx512() {
             return pulp::Simd::vectorize(simd, Widest(kernel));
         }
         if let Some(simd) = pulp::x86::V3::try_new() {

@@ -564,7 +564,7 @@ impl Renderer {
         // Compiled for the widest instruction set found at run time (the occlusion
         // tests' scans and the resolve vectorise with it; the same operations, so the
         // same bits).
-        Ok(pulp::Arch::new().dispatch(RenderView {
+        Ok(isa::arch().dispatch(RenderView {
             renderer: self,
             cloud,
             view,
@@ -1645,7 +1645,7 @@ fn widest_pass_one(
     #[cfg(target_arch = "x86_64")]
     {
         // `Simd::vectorize`, not the inherent one (which takes a closure).
-        if let Some(simd) = pulp::x86::V4::try_new() {
+        if let Some(simd) = isa::avx512() {
             return pulp::Simd::vectorize(simd, PassOne(args, Avx512(simd)));
         }
         if let Some(simd) = pulp::x86::V3::try_new() {
@@ -2067,7 +2067,7 @@ impl<P: Project> pulp::WithSimd for PassTwo<'_, P> {
 fn widest_pass_two(splats: &[Splat], view: &View, depth: &[u32], accum: &mut [[u64; 2]]) {
     #[cfg(target_arch = "x86_64")]
     {
-        if let Some(simd) = pulp::x86::V4::try_new() {
+        if let Some(simd) = isa::avx512() {
             let projector = Avx512(simd);
             return pulp::Simd::vectorize(
                 simd,

@@ -1,0 +1,123 @@
+//! `vvs`: what a user waits for (issue #36's goals, one core): a local localisation
+//! from 0.5 m / 5° on the city at 320×240 (goal 50 ms), `global` inside the paper's box
+//! at 320×240 (goal 0.5 s), and one PGMoT frame at 640×480 (goal 33 ms, 30 Hz).
+//!
+//! End to end as `vvs::Localizer` and `vvs::Tracker` run them, with their defaults on
+//! one thread: the picture (rendered at the truth, then degraded by the default
+//! acquisition) in memory, the cloud loaded. Each result is checked against the truth
+//! before it is timed, so that a faster but wrong configuration cannot pass. Set
+//! `PGM_NO_AVX512=1` to measure what a processor without AVX-512 runs (`isa`).
+
+use benches::fixture_camera;
+use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use glam::DVec3;
+use ucm::{Camera, Isometry3};
+use vvs::{Localizer, Method, PriorBox, Servo, Tracker, VvsConfig};
+use world::Acquisition;
+use world::city::{City, CityParams, camera_looking_down};
+
+/// The localiser's defaults on one thread.
+fn one_thread() -> VvsConfig {
+    VvsConfig {
+        parallel: false,
+        ..Localizer::default().config
+    }
+}
+
+/// The picture a camera at `truth` takes of the city (rendered, then acquired).
+fn picture(city: &City, camera: &Camera, truth: &Isometry3) -> frame::Image {
+    let mut servo = Servo::new(&city.cloud, camera, one_thread()).unwrap();
+    let rendered = servo.render(truth).unwrap();
+    Acquisition::default().acquire(&rendered, camera, 0, 0.0)
+}
+
+fn goal_localization(c: &mut Criterion) {
+    let city = City::generate(&CityParams::default()).unwrap();
+    let camera = fixture_camera("omni-320x240.toml");
+    let truth = camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.0);
+    let picture = picture(&city, &camera, &truth);
+    let localizer = Localizer {
+        config: one_thread(),
+        ..Localizer::default()
+    };
+    println!("instruction set: {}", isa::widest_name());
+
+    // From 0.5 m and 5°.
+    let start = truth * Isometry3::from_pose_vector([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]).unwrap();
+    let (t0, r0) = start.distance_to(&truth);
+    let outcome = localizer
+        .localize(&city.cloud, &camera, &picture, start)
+        .unwrap();
+    let (t, r) = outcome.world_from_camera.distance_to(&truth);
+    println!(
+        "local: from {t0:.2} m, {:.1}°: {t:.4} m, {:.2}°, {:?} iterations",
+        r0.to_degrees(),
+        r.to_degrees(),
+        outcome.iterations
+    );
+    assert!(t < 0.02, "the local localisation ends {t} m from the truth");
+    let mut group = c.benchmark_group("goal_localization_le_50ms_320");
+    group.sample_size(10);
+    group.bench_function("localizer/from_0.5m_5deg", |b| {
+        b.iter(|| {
+            localizer
+                .localize(&city.cloud, &camera, &picture, start)
+                .unwrap()
+        })
+    });
+    group.finish();
+
+    // Inside the paper's box, from its corner.
+    let global = Localizer {
+        prior: Some(PriorBox::default()),
+        ..localizer.clone()
+    };
+    let corner = truth * Isometry3::from_pose_vector([6.0, 1.5, 0.5, 0.0, 0.0, 0.15]).unwrap();
+    let outcome = global
+        .localize(&city.cloud, &camera, &picture, corner)
+        .unwrap();
+    let (t, _) = outcome.world_from_camera.distance_to(&truth);
+    println!("global: from the box's corner: {t:.4} m");
+    assert!(t < 0.05, "the global search ends {t} m from the truth");
+    let mut group = c.benchmark_group("goal_global_le_500ms_320");
+    group.sample_size(10);
+    group.bench_function("localizer_in_the_paper_box/from_its_corner", |b| {
+        b.iter(|| {
+            global
+                .localize(&city.cloud, &camera, &picture, corner)
+                .unwrap()
+        })
+    });
+    group.finish();
+}
+
+fn goal_pgmot_frame(c: &mut Criterion) {
+    let city = City::generate(&CityParams::default()).unwrap();
+    let camera = fixture_camera("omni-640x480.toml");
+    let truth = camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.0);
+    let picture = picture(&city, &camera, &truth);
+    // The frame before: 5 cm and 0.5° back along the street (a car at 1.5 m/s, 30 Hz).
+    let previous = truth
+        * Isometry3::from_pose_vector([-0.05, 0.0, 0.0, 0.0, 0.0, 0.5f64.to_radians()]).unwrap();
+    let tracker = || {
+        let servo = Servo::new(&city.cloud, &camera, one_thread()).unwrap();
+        Tracker::new(servo, Method::Rule2, previous).unwrap()
+    };
+    let outcome = tracker().align(&picture).unwrap();
+    let (t, _) = outcome.world_from_camera.distance_to(&truth);
+    println!("PGMoT frame: {t:.4} m, {:?} iterations", outcome.iterations);
+    assert!(t < 0.02, "the frame ends {t} m from the truth");
+    let mut group = c.benchmark_group("goal_pgmot_frame_le_33ms_640");
+    group.sample_size(10);
+    group.bench_function("localizer_rule2/640", |b| {
+        b.iter_batched(
+            tracker,
+            |mut tracker| tracker.align(&picture).unwrap(),
+            BatchSize::PerIteration,
+        )
+    });
+    group.finish();
+}
+
+criterion_group!(benches, goal_localization, goal_pgmot_frame);
+criterion_main!(benches);
