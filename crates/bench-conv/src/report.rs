@@ -83,23 +83,32 @@ pub struct RunManifest {
     pub extras: bool,
     /// Runs of the whole protocol (every shard).
     pub total_runs: usize,
+    /// Every run id of the protocol is below this (its run list's length; more than
+    /// `total_runs` for an adaptive protocol, whose skipped runs leave gaps).
+    #[serde(default)]
+    pub run_id_limit: Option<usize>,
     /// This shard `[i, n]`, or none for the whole protocol.
     pub shard: Option<[usize; 2]>,
     /// Rows of the `runs.csv` beside it.
     pub runs: usize,
 }
 
-/// A 64-bit FNV-1a fingerprint of `bytes`, as 16 hexadecimal digits (to tell files
-/// apart, not to resist anyone).
+/// A 64-bit FNV-1a fingerprint of `bytes` without their carriage returns (a file
+/// checked out with CRLF or LF line ends is one file), as 16 hexadecimal digits (to
+/// tell files apart, not to resist anyone).
 pub fn fingerprint(bytes: &[u8]) -> String {
-    let hash = bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    });
+    let hash = bytes
+        .iter()
+        .filter(|&&b| b != b'\r')
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
     format!("{hash:016x}")
 }
 
 /// Every merged run is a run of the protocol its manifests describe: a run id at or
-/// past their run count is an error (known only when every CSV has its manifest).
+/// past their `run_id_limit` is an error (known only when every CSV has a manifest
+/// that states it).
 pub fn check_run_ids(
     records: &[RunRecord],
     manifests: &[Option<RunManifest>],
@@ -107,16 +116,21 @@ pub fn check_run_ids(
     let Some(Some(first)) = manifests.first() else {
         return Ok(());
     };
-    if manifests.iter().any(Option::is_none) {
+    let Some(limit) = first.run_id_limit else {
+        return Ok(());
+    };
+    if manifests
+        .iter()
+        .any(|m| m.as_ref().is_none_or(|m| m.run_id_limit != Some(limit)))
+    {
         return Ok(());
     }
-    if let Some(r) = records.iter().find(|r| r.run_id >= first.total_runs) {
+    if let Some(r) = records.iter().find(|r| r.run_id >= limit) {
         bail!(
-            "run {} is not a run of protocol `{}`, which has {} runs (ids 0 to {})",
+            "run {} is not a run of protocol `{}`, whose run ids go from 0 to {}",
             r.run_id,
             first.protocol,
-            first.total_runs,
-            first.total_runs.saturating_sub(1)
+            limit.saturating_sub(1)
         );
     }
     Ok(())
@@ -232,15 +246,6 @@ pub fn completeness(
     }
     let mut seen = vec![false; count];
     for m in &all {
-        if let (Some(a), Some(b)) = (&first.protocol_hash, &m.protocol_hash)
-            && a != b
-        {
-            bail!(
-                "the CSV files come from two different protocol files, both named `{}` \
-                 (fingerprints {a} and {b})",
-                m.protocol
-            );
-        }
         if (&m.protocol, m.extras, m.total_runs)
             != (&first.protocol, first.extras, first.total_runs)
             || m.shard.map_or(1, |[_, n]| n) != count
@@ -256,6 +261,15 @@ pub fn completeness(
                 m.extras,
                 m.total_runs,
                 m.shard.map_or(1, |[_, n]| n)
+            );
+        }
+        if let (Some(a), Some(b)) = (&first.protocol_hash, &m.protocol_hash)
+            && a != b
+        {
+            bail!(
+                "the CSV files come from two different protocol files, both named `{}` \
+                 (fingerprints {a} and {b})",
+                m.protocol
             );
         }
         let i = m.shard.map_or(0, |[i, _]| i);

@@ -764,6 +764,7 @@ fn merges_know_whether_they_are_complete() {
             protocol_hash: Some(fingerprint(b"name = \"fig3\"")),
             extras: false,
             total_runs: 10,
+            run_id_limit: Some(10),
             shard: Some([i, 3]),
             runs,
         })
@@ -818,6 +819,14 @@ fn merges_know_whether_they_are_complete() {
     );
     assert!(past.contains("run 10 is not a run"), "{past}");
     check_run_ids(&[record(10)], &[shard(0, 4), None]).unwrap();
+    // An adaptive protocol ran fewer runs than its ids span: ids count, not runs.
+    let adaptive = |i: usize| {
+        shard(i, 3).map(|m| RunManifest {
+            run_id_limit: Some(12),
+            ..m
+        })
+    };
+    check_run_ids(&[record(11)], &[adaptive(0), adaptive(1), adaptive(2)]).unwrap();
     // Through the file beside a runs.csv.
     let dir = temp("manifest");
     write_manifest(&dir, shard(2, 3).as_ref().unwrap()).unwrap();

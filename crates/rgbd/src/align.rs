@@ -69,10 +69,18 @@ impl Surface {
         }
         let (w, h) = (depth.width() as usize, depth.height() as usize);
         let d = &depth.depth_m;
+        // `depth_m` is a public field: its length is checked, not assumed.
+        if d.len() != w * h {
+            return Err(RgbdError::Length {
+                what: "depth_m",
+                got: d.len(),
+                expected: w * h,
+            });
+        }
         // The point of every measured pixel (depth along the optical axis).
         let point = |x: usize, y: usize| -> Option<Vec3> {
             let z = d[y * w + x];
-            if z <= 0.0 {
+            if !(z > 0.0 && z.is_finite()) {
                 return None;
             }
             let ray = camera.unproject([x as f64, y as f64]).ok()?;

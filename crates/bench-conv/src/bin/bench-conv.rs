@@ -309,6 +309,7 @@ fn main() -> anyhow::Result<()> {
                 } else {
                     protocol.runs(extras)?.len()
                 },
+                run_id_limit: Some(protocol.runs(extras)?.len()),
                 shard: shard.map(|s| [s.index, s.count]),
                 runs: records.len(),
             };

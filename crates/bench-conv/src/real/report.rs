@@ -149,7 +149,7 @@ fn pose_check_table(text: &mut String, poses: &[PoseCheckRecord]) {
         (Some(a), Some(b)) => format!("{a:.1} → {b:.1} mm"),
         _ => "—".into(),
     };
-    let together = poses.iter().find(|r| r.frames > 1).map_or(0, |r| r.frames);
+    let together = poses.iter().map(|r| r.frames).max().unwrap_or(0);
     let _ = writeln!(
         text,
         "| query | its nearest frame: correction | RMS at the truth → aligned | the frame that moves it most: correction | that frame's distance | {together} nearest together: correction | RMS at the truth → aligned |\n|---:|---|---|---|---:|---|---|"

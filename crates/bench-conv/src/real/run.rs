@@ -537,7 +537,15 @@ impl Benchmark {
                 min_frames: self.spec.fuse.min_frames.min(frames.len() as u32),
                 ..self.spec.fuse
             };
-            let (cloud, _) = self.dataset.fuse(&frames, options, |_, _| {})?;
+            let (cloud, _) = self
+                .dataset
+                .fuse(&frames, options, |_, _| {})
+                .with_context(|| {
+                    format!(
+                        "the local map of query {} from start {} (frames {frames:?})",
+                        q.frame, job.start
+                    )
+                })?;
             let outcome = Servo::new(&cloud, camera, method.config())?.run(
                 method.method,
                 picture,
@@ -707,8 +715,11 @@ impl Benchmark {
                             let (m, rad) = aligned.distance_to(&q.truth);
                             record.correction_m = Some(m);
                             record.correction_deg = Some(rad.to_degrees());
-                            record.rms_before_mm = Some(1e3 * a.rms_before_m);
-                            record.rms_after_mm = Some(1e3 * a.rms_after_m);
+                            // No pair at the truth: no RMS there (not a NaN).
+                            record.rms_before_mm =
+                                a.rms_before_m.is_finite().then_some(1e3 * a.rms_before_m);
+                            record.rms_after_mm =
+                                a.rms_after_m.is_finite().then_some(1e3 * a.rms_after_m);
                             record.pairs_before = Some(a.pairs_before);
                             record.pairs_after = Some(a.pairs_after);
                             record.conditioning = Some(a.conditioning);
