@@ -295,6 +295,12 @@ pub fn completeness(
     }
 }
 
+/// A protocol run's success: its final position error below the threshold, and a
+/// finite cost (a run whose cost is not finite never succeeds).
+pub fn is_success(position_error_m: f64, cost: f64, threshold_m: f64) -> bool {
+    position_error_m < threshold_m && cost.is_finite()
+}
+
 /// The file that marks a results folder whose writing has not finished.
 pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
 
@@ -603,7 +609,7 @@ pub fn apply_threshold(records: &mut [RunRecord], threshold_m: f64) -> anyhow::R
         bail!("the success threshold must be finite and > 0, got {threshold_m}");
     }
     for r in records {
-        r.success = r.final_position_error_m < threshold_m && r.cost.is_finite();
+        r.success = is_success(r.final_position_error_m, r.cost, threshold_m);
     }
     Ok(())
 }

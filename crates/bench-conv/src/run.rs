@@ -269,8 +269,11 @@ impl Shared<'_> {
                     let mut records = Vec::with_capacity(job.len());
                     for (spec, outcome) in job.iter().zip(outcomes) {
                         let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);
-                        // A run whose cost is not finite is never a success.
-                        let success = dt < protocol.success_threshold_m && outcome.cost.is_finite();
+                        let success = crate::report::is_success(
+                            dt,
+                            outcome.cost,
+                            protocol.success_threshold_m,
+                        );
                         records.push(RunRecord {
                             run_id: spec.id,
                             scene: scene_name.to_string(),

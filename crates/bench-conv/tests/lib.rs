@@ -2,5 +2,6 @@
 
 mod fuzz;
 mod protocol;
+mod real;
 mod real_image;
 mod tracking;

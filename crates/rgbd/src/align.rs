@@ -20,6 +20,7 @@ use faer::{Mat, Side};
 use glam::{DVec3, Vec3};
 use ucm::{Camera, Isometry3};
 
+use crate::error::{check_pose, check_size};
 use crate::{DepthImage, RgbdError};
 
 /// A depth picture as a surface: per pixel a point and a unit normal in its camera's
@@ -45,22 +46,13 @@ impl Surface {
         world_from_depth: &Isometry3,
         max_depth_jump: f32,
     ) -> Result<Self, RgbdError> {
-        if (depth.width(), depth.height()) != (camera.width(), camera.height()) {
-            return Err(RgbdError::Size {
-                what: "depth picture",
-                path: "<memory>".into(),
-                got_width: depth.width(),
-                got_height: depth.height(),
-                width: camera.width(),
-                height: camera.height(),
-            });
-        }
-        if !world_from_depth.is_finite() {
-            return Err(RgbdError::Parameter {
-                name: "world_from_depth",
-                message: "the pose is not finite".into(),
-            });
-        }
+        check_size(
+            "depth picture",
+            "<memory>".into(),
+            (depth.width(), depth.height()),
+            camera,
+        )?;
+        check_pose("world_from_depth", world_from_depth)?;
         if !(max_depth_jump > 0.0 && max_depth_jump.is_finite()) {
             return Err(RgbdError::Parameter {
                 name: "max_depth_jump",
@@ -253,6 +245,16 @@ struct Normal {
     pairs: usize,
 }
 
+/// The row `∂r/∂δ` of the point-to-plane residual `r = mᵀ (pose · exp(δ) · p − q)`
+/// at δ = 0, where `inverse` is the pose's rotation inverted, `p` the point in the
+/// query camera's frame and `m` the target's normal in the world:
+/// `mᵀ R [I, −[p]×] = [(Rᵀm)ᵀ, (p × Rᵀm)ᵀ]`.
+fn point_to_plane_row(inverse: glam::DQuat, p: DVec3, m: DVec3) -> [f64; 6] {
+    let a = inverse * m;
+    let b = p.cross(a);
+    [a.x, a.y, a.z, b.x, b.y, b.z]
+}
+
 /// One pass: every query point (camera frame) paired in every surface at
 /// `world_from_depth`; the normal equations of the step `δ` such that the pose becomes
 /// `world_from_depth · exp(δ)`.
@@ -278,10 +280,7 @@ fn accumulate(
                 continue;
             }
             let r = m.dot(world - q);
-            // ∂r/∂δ = mᵀ R [I, −[p]×] = [(Rᵀm)ᵀ, (p × Rᵀm)ᵀ].
-            let a = inverse * m;
-            let b = p.cross(a);
-            let j = [a.x, a.y, a.z, b.x, b.y, b.z];
+            let j = point_to_plane_row(inverse, p, m);
             let weight = if r.abs() <= huber_m {
                 1.0
             } else {
@@ -367,12 +366,6 @@ pub fn align_depth(
         )
     };
     let before = pass(world_from_depth, options.final_distance_m);
-    if pass(world_from_depth, options.first_distance_m).pairs == 0 {
-        return Err(RgbdError::NoOverlap {
-            points: points.len(),
-            surfaces: surfaces.len(),
-        });
-    }
     let mut pose = *world_from_depth;
     let mut iterations = 0;
     for iteration in 0..options.iterations {
@@ -440,5 +433,48 @@ fn conditioning(sums: &Normal, range_m: f64) -> f64 {
         ratio.max(0.0)
     } else {
         0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+    use proptest::prelude::*;
+    use ucm::Isometry3;
+
+    use super::point_to_plane_row;
+
+    proptest! {
+        /// The residual's row against central differences of `r(δ)` along each of the
+        /// six directions, over random poses, points, normals and target points.
+        #[test]
+        fn the_point_to_plane_row_matches_finite_differences(
+            pose in prop::array::uniform6(-2.0f64..2.0),
+            p in prop::array::uniform3(-3.0f64..3.0),
+            n in prop::array::uniform3(-1.0f64..1.0),
+            q in prop::array::uniform3(-3.0f64..3.0),
+        ) {
+            let pose = Isometry3::from_pose_vector(pose).unwrap();
+            let (p, q) = (DVec3::from(p), DVec3::from(q));
+            prop_assume!(DVec3::from(n).length() > 0.1);
+            let m = DVec3::from(n).normalize();
+            let residual = |delta: [f64; 6]| {
+                let moved = pose * Isometry3::exp(delta).unwrap();
+                m.dot(moved.transform_point(p) - q)
+            };
+            let row = point_to_plane_row(pose.rotation.inverse(), p, m);
+            let h = 1e-6;
+            for (k, &analytic) in row.iter().enumerate() {
+                let mut plus = [0.0; 6];
+                let mut minus = [0.0; 6];
+                plus[k] = h;
+                minus[k] = -h;
+                let numeric = (residual(plus) - residual(minus)) / (2.0 * h);
+                prop_assert!(
+                    (numeric - analytic).abs() < 1e-6 * (1.0 + analytic.abs()),
+                    "direction {}: {} against {}", k, numeric, analytic
+                );
+            }
+        }
     }
 }

@@ -31,6 +31,7 @@ use glam::{DMat3, DQuat, DVec3};
 use serde::Deserialize;
 use ucm::{Camera, Isometry3};
 
+use crate::error::check_size;
 use crate::{ColorImage, DepthImage, FrameStats, FuseOptions, Fusion, RgbdError, Sensor};
 
 /// Which camera a dataset's poses place.
@@ -269,26 +270,6 @@ fn read_pose_lines(path: &Path) -> Result<Vec<Isometry3>, RgbdError> {
             Ok(Isometry3::from_rotation_translation(q, t))
         })
         .collect()
-}
-
-/// A picture of its camera's size, or the error that says it is not.
-fn check_size(
-    what: &'static str,
-    path: PathBuf,
-    got: (u32, u32),
-    camera: &Camera,
-) -> Result<(), RgbdError> {
-    if got == (camera.width(), camera.height()) {
-        return Ok(());
-    }
-    Err(RgbdError::Size {
-        what,
-        path,
-        got_width: got.0,
-        got_height: got.1,
-        width: camera.width(),
-        height: camera.height(),
-    })
 }
 
 impl RgbdDataset {

@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 
+use ucm::{Camera, Isometry3};
+
 /// Everything that can go wrong when reading RGB-D frames and fusing them.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -134,4 +136,36 @@ pub enum RgbdError {
     /// The cloud could not be built.
     #[error(transparent)]
     Cloud(#[from] splat::SplatError),
+}
+
+/// A picture of its camera's size (`got`, read from `path`), or the error that says it
+/// is not.
+pub(crate) fn check_size(
+    what: &'static str,
+    path: PathBuf,
+    got: (u32, u32),
+    camera: &Camera,
+) -> Result<(), RgbdError> {
+    if got == (camera.width(), camera.height()) {
+        return Ok(());
+    }
+    Err(RgbdError::Size {
+        what,
+        path,
+        got_width: got.0,
+        got_height: got.1,
+        width: camera.width(),
+        height: camera.height(),
+    })
+}
+
+/// A finite pose, or the error that says `name` is not.
+pub(crate) fn check_pose(name: &'static str, pose: &Isometry3) -> Result<(), RgbdError> {
+    if pose.is_finite() {
+        return Ok(());
+    }
+    Err(RgbdError::Parameter {
+        name,
+        message: "the pose is not finite".into(),
+    })
 }

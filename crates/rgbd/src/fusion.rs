@@ -22,6 +22,7 @@ use glam::DVec3;
 use splat::PointCloud;
 use ucm::{Camera, Isometry3};
 
+use crate::error::{check_pose, check_size};
 use crate::{ColorImage, DepthImage, RgbdError};
 
 /// The two cameras of an RGB-D sensor and how they sit.
@@ -269,36 +270,19 @@ impl Fusion {
         color: &ColorImage,
         world_from_depth: &Isometry3,
     ) -> Result<FrameStats, RgbdError> {
-        let size = |what, got: (u32, u32), camera: &Camera| {
-            if got == (camera.width(), camera.height()) {
-                Ok(())
-            } else {
-                Err(RgbdError::Size {
-                    what,
-                    path: "<memory>".into(),
-                    got_width: got.0,
-                    got_height: got.1,
-                    width: camera.width(),
-                    height: camera.height(),
-                })
-            }
-        };
-        size(
+        check_size(
             "depth picture",
+            "<memory>".into(),
             (depth.width(), depth.height()),
             &self.sensor.depth_camera,
         )?;
-        size(
+        check_size(
             "colour picture",
+            "<memory>".into(),
             (color.width(), color.height()),
             &self.sensor.color_camera,
         )?;
-        if !world_from_depth.is_finite() {
-            return Err(RgbdError::Parameter {
-                name: "world_from_depth",
-                message: "the pose is not finite".into(),
-            });
-        }
+        check_pose("world_from_depth", world_from_depth)?;
         let mut stats = FrameStats::default();
         let (w, h) = (depth.width() as usize, depth.height() as usize);
         let [near, far] = self.options.depth_range_m;

@@ -45,6 +45,15 @@ pub enum Prediction {
 }
 
 impl Prediction {
+    /// Its name in settings files (`last`, `constant_velocity`, `constant_translation`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Prediction::Last => "last",
+            Prediction::ConstantVelocity => "constant_velocity",
+            Prediction::ConstantTranslation => "constant_translation",
+        }
+    }
+
     /// The start of the next alignment from the last `estimate` and the one before.
     pub fn predict(self, estimate: Isometry3, previous: Option<Isometry3>) -> Isometry3 {
         match (self, previous) {

@@ -176,6 +176,9 @@ fn predictions_extrapolate_the_last_two_estimates() {
             estimate,
             "{prediction:?}"
         );
+        // Its name is the one settings files use.
+        let written = toml::Value::try_from(prediction).unwrap();
+        assert_eq!(written.as_str(), Some(prediction.name()));
     }
     assert_eq!(Prediction::default(), Prediction::Last);
     assert_eq!(Prediction::Last.predict(estimate, Some(previous)), estimate);

@@ -49,10 +49,10 @@ macro_rules! ensure {
     };
 }
 
-/// Most frames a sequence may have: every frame is rendered and kept (about 70 KB
 /// The highest frame rate of a trajectory, frames per second (a high-speed camera's).
 pub const MAX_FPS: f64 = 10_000.0;
 
+/// Most frames a sequence may have: every frame is rendered and kept (about 70 KB
 /// at 320×240, per tracking configuration), so 10 000 frames take about 0.7 GB each.
 pub const MAX_FRAMES: usize = 10_000;
 /// Longest path of a sequence, metres.

@@ -299,6 +299,7 @@ fn main() -> anyhow::Result<()> {
             };
             let protocol_bytes = std::fs::read(&protocol_path)
                 .with_context(|| format!("reading {}", protocol_path.display()))?;
+            let run_ids = protocol.runs(extras)?.len();
             let manifest = bench_conv::report::RunManifest {
                 protocol: protocol.name.clone(),
                 protocol_hash: Some(bench_conv::report::fingerprint(&protocol_bytes)),
@@ -307,9 +308,9 @@ fn main() -> anyhow::Result<()> {
                 total_runs: if protocol.offsets.adaptive {
                     records.len()
                 } else {
-                    protocol.runs(extras)?.len()
+                    run_ids
                 },
-                run_id_limit: Some(protocol.runs(extras)?.len()),
+                run_id_limit: Some(run_ids),
                 shard: shard.map(|s| [s.index, s.count]),
                 runs: records.len(),
             };

@@ -2,6 +2,7 @@
 //! localisation in parallel over rayon, each on one thread, the results in a stable
 //! order whatever the thread count.
 
+use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -493,7 +494,62 @@ impl Benchmark {
         Ok(jobs)
     }
 
-    fn run_job(&self, job: &Job) -> anyhow::Result<(Outcome, String)> {
+    /// `[local_map]`: for each (query, start) of a local job, the cloud fused from the
+    /// frames of the query's cloud nearest the start — once, whatever the number of
+    /// methods run in it (all of them held until the localisations end).
+    fn local_clouds(&self, jobs: &[Job]) -> anyhow::Result<HashMap<(usize, String), PointCloud>> {
+        let Some(local) = &self.spec.local_map else {
+            return Ok(HashMap::new());
+        };
+        let mut starts: Vec<&Job> = Vec::new();
+        for job in jobs.iter().filter(|j| j.local) {
+            if !starts
+                .iter()
+                .any(|s| s.query == job.query && s.start == job.start)
+            {
+                starts.push(job);
+            }
+        }
+        if !starts.is_empty() {
+            eprintln!(
+                "fusing {} local maps of {} frames",
+                starts.len(),
+                local.frames
+            );
+        }
+        starts
+            .par_iter()
+            .map(|job| {
+                let q = &self.queries[job.query];
+                let frames: Vec<u64> =
+                    by_distance(&self.dataset, &self.cloud_frames[q.cloud], &job.initial)?
+                        .into_iter()
+                        .take(local.frames)
+                        .map(|(f, ..)| f)
+                        .collect();
+                let options = rgbd::FuseOptions {
+                    min_frames: self.spec.fuse.min_frames.min(frames.len() as u32),
+                    ..self.spec.fuse
+                };
+                let (cloud, _) = self
+                    .dataset
+                    .fuse(&frames, options, |_, _| {})
+                    .with_context(|| {
+                        format!(
+                            "the local map of query {} from start {} (frames {frames:?})",
+                            q.frame, job.start
+                        )
+                    })?;
+                Ok(((job.query, job.start.clone()), cloud))
+            })
+            .collect()
+    }
+
+    fn run_job(
+        &self,
+        job: &Job,
+        local_clouds: &HashMap<(usize, String), PointCloud>,
+    ) -> anyhow::Result<(Outcome, String)> {
         let q = &self.queries[job.query];
         let cloud = &self.clouds[q.cloud];
         let (camera, picture) = match (&self.catadioptric, job.catadioptric) {
@@ -527,26 +583,10 @@ impl Benchmark {
         let method = job.method.expect("a method");
         if job.local {
             let local = self.spec.local_map.as_ref().expect("local map settings");
-            let frames: Vec<u64> =
-                by_distance(&self.dataset, &self.cloud_frames[q.cloud], &job.initial)?
-                    .into_iter()
-                    .take(local.frames)
-                    .map(|(f, ..)| f)
-                    .collect();
-            let options = rgbd::FuseOptions {
-                min_frames: self.spec.fuse.min_frames.min(frames.len() as u32),
-                ..self.spec.fuse
-            };
-            let (cloud, _) = self
-                .dataset
-                .fuse(&frames, options, |_, _| {})
-                .with_context(|| {
-                    format!(
-                        "the local map of query {} from start {} (frames {frames:?})",
-                        q.frame, job.start
-                    )
-                })?;
-            let outcome = Servo::new(&cloud, camera, method.config())?.run(
+            let cloud = local_clouds
+                .get(&(job.query, job.start.clone()))
+                .expect("a local cloud for every local job");
+            let outcome = Servo::new(cloud, camera, method.config())?.run(
                 method.method,
                 picture,
                 job.initial,
@@ -561,11 +601,12 @@ impl Benchmark {
     /// Every localisation of the benchmark, with progress; records in job order.
     pub fn localize(&self) -> anyhow::Result<Vec<RunRecord>> {
         let jobs = self.jobs()?;
+        let local_clouds = self.local_clouds(&jobs)?;
         let progress = Progress::new(jobs.len() as u64, "localisations");
         let outcomes = jobs
             .par_iter()
             .map(|job| {
-                let result = self.run_job(job);
+                let result = self.run_job(job, &local_clouds);
                 progress.inc(1, "");
                 result
             })
@@ -788,13 +829,7 @@ impl Benchmark {
             .map(|&(method, prediction, step)| {
                 let name = match prediction {
                     vvs::Prediction::Last => method.name(),
-                    other => {
-                        let text = toml::Value::try_from(other)
-                            .ok()
-                            .and_then(|v| v.as_str().map(str::to_owned))
-                            .unwrap_or_default();
-                        format!("{} ({})", method.name(), text.replace('_', " "))
-                    }
+                    other => format!("{} ({})", method.name(), other.name().replace('_', " ")),
                 };
                 let servo = Servo::new(&self.clouds[0], &self.camera, method.config())?;
                 let mut tracker =
