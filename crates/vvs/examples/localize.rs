@@ -131,7 +131,19 @@ fn main() -> anyhow::Result<()> {
         ..Localizer::default()
     };
     localizer.config.global.heading_spacing_deg = Some(args.heading_spacing);
-    let localized = localizer.localize_files(&files, initial)?;
+    // A global search runs for seconds: its phases on stderr, at most twice a second.
+    let mut shown: Option<(std::time::Instant, vvs::SearchPhase)> = None;
+    let mut show = |p: vvs::SearchProgress| {
+        let due = match shown {
+            None => true,
+            Some((at, phase)) => phase != p.phase || at.elapsed().as_secs_f64() >= 0.5,
+        };
+        if due || p.done == p.total {
+            eprintln!("global search: {} {}/{}", p.phase.name(), p.done, p.total);
+            shown = Some((std::time::Instant::now(), p.phase));
+        }
+    };
+    let localized = localizer.localize_files_with_progress(&files, initial, &mut show)?;
     let o = &localized.outcome;
     println!(
         "read {} points and {} valid pixels in {:.1} s",

@@ -517,3 +517,38 @@ pub struct SearchReport {
     /// preparation), low-resolution descents, full-resolution refinements.
     pub phase_times_s: [f64; 3],
 }
+
+/// A phase of a global search.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SearchPhase {
+    /// The cost of every grid node at low resolution.
+    Screening,
+    /// Low-resolution descents from the best nodes.
+    Descents,
+    /// Full-resolution refinements of the best descents.
+    Refinements,
+}
+
+impl SearchPhase {
+    /// The phase's name, lower case.
+    pub fn name(self) -> &'static str {
+        match self {
+            SearchPhase::Screening => "screening",
+            SearchPhase::Descents => "descents",
+            SearchPhase::Refinements => "refinements",
+        }
+    }
+}
+
+/// Where a global search stands, given to a progress callback
+/// ([`crate::Servo::localize_in_box_with_progress`]) after each node screened, each
+/// descent and each refinement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SearchProgress {
+    /// The phase.
+    pub phase: SearchPhase,
+    /// Items of the phase done.
+    pub done: usize,
+    /// Items of the phase in all.
+    pub total: usize,
+}

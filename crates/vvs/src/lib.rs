@@ -13,7 +13,10 @@ pub mod track;
 
 pub use config::{MAX_ITERATIONS, MAX_PGM_STRIDE, Method, Robust, Support, VvsConfig};
 pub use error::VvsError;
-pub use global::{GlobalConfig, PriorBox, SearchReport, turned, turned_about_optical_axis};
+pub use global::{
+    GlobalConfig, PriorBox, SearchPhase, SearchProgress, SearchReport, turned,
+    turned_about_optical_axis,
+};
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;

@@ -31,7 +31,8 @@ use splat::PointCloud;
 use ucm::{Camera, Isometry3};
 
 use crate::{
-    Divergence, Method, Outcome, PriorBox, Servo, StopReason, Support, VvsConfig, VvsError,
+    Divergence, Method, Outcome, PriorBox, SearchProgress, Servo, StopReason, Support, VvsConfig,
+    VvsError,
 };
 
 /// Where the camera's calibration comes from.
@@ -131,12 +132,27 @@ impl Localizer {
         picture: &D,
         initial: Isometry3,
     ) -> Result<Outcome, VvsError> {
+        self.localize_with_progress(cloud, camera, picture, initial, &mut |_| ())
+    }
+
+    /// [`Localizer::localize`], calling `progress` as a global search goes on (a local
+    /// localisation does not call it).
+    pub fn localize_with_progress<D: AnyImage + Clone>(
+        &self,
+        cloud: &PointCloud,
+        camera: &Camera,
+        picture: &D,
+        initial: Isometry3,
+        progress: &mut dyn FnMut(SearchProgress),
+    ) -> Result<Outcome, VvsError> {
         let mut servo = Servo::new(cloud, camera, self.config.clone())?;
-        match &self.prior {
-            Some(prior) => servo.localize_in_box(picture, initial, prior),
-            None if self.method == Method::Global => {
-                servo.localize_in_box(picture, initial, &self.config.global.prior)
-            }
+        let prior = match &self.prior {
+            Some(prior) => Some(prior),
+            None if self.method == Method::Global => Some(&self.config.global.prior),
+            None => None,
+        };
+        match prior {
+            Some(prior) => servo.localize_in_box_with_progress(picture, initial, prior, progress),
             None => {
                 let outcome = servo.run(self.method, picture, initial)?;
                 // Nothing seen before the first step: an input to fix, not a divergence.
@@ -158,6 +174,16 @@ impl Localizer {
         files: &LocalizeFiles,
         initial: Isometry3,
     ) -> Result<Localized, VvsError> {
+        self.localize_files_with_progress(files, initial, &mut |_| ())
+    }
+
+    /// [`Localizer::localize_files`], calling `progress` as a global search goes on.
+    pub fn localize_files_with_progress(
+        &self,
+        files: &LocalizeFiles,
+        initial: Isometry3,
+        progress: &mut dyn FnMut(SearchProgress),
+    ) -> Result<Localized, VvsError> {
         if !initial.is_finite() {
             return Err(VvsError::NonFinitePose);
         }
@@ -166,7 +192,7 @@ impl Localizer {
         let picture = Image::load(&files.picture, &camera, files.crop)?;
         let (cloud, _) = splat::read_las(&files.cloud)?;
         let load_time_s = started.elapsed().as_secs_f64();
-        let outcome = self.localize(&cloud, &camera, &picture, initial)?;
+        let outcome = self.localize_with_progress(&cloud, &camera, &picture, initial, progress)?;
         Ok(Localized {
             outcome,
             valid_pixels: picture.valid_count(),

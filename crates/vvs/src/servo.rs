@@ -9,7 +9,7 @@ use pgm::{Pgm, PgmOptions};
 use splat::{PointCloud, RenderOptions, Renderer};
 use ucm::{Camera, Isometry3};
 
-use crate::global::{MAX_CANDIDATES, PriorBox, SearchReport};
+use crate::global::{MAX_CANDIDATES, PriorBox, SearchPhase, SearchProgress, SearchReport};
 use crate::photometric::{MAX_COEFFICIENT, RadialVignetting};
 use crate::solve::solve;
 use crate::{
@@ -357,6 +357,21 @@ impl<'a> Servo<'a> {
         initial: Isometry3,
         prior: &PriorBox,
     ) -> Result<Outcome, VvsError> {
+        self.localize_in_box_with_progress(desired, initial, prior, &mut |_| ())
+    }
+
+    /// [`Servo::localize_in_box`], calling `progress` after each node screened, each
+    /// descent and each refinement (a search in a large box runs for seconds).
+    pub fn localize_in_box_with_progress<D: AnyImage + Clone>(
+        &mut self,
+        desired: &D,
+        initial: Isometry3,
+        prior: &PriorBox,
+        progress: &mut dyn FnMut(SearchProgress),
+    ) -> Result<Outcome, VvsError> {
+        let mut report = |phase, done, total| {
+            progress(SearchProgress { phase, done, total });
+        };
         self.check_inputs(desired, &initial)?;
         let settings = self.config.global.clone();
         let nodes = prior.grid(settings.grid_spacing_m)?;
@@ -509,6 +524,7 @@ impl<'a> Servo<'a> {
                     squared.push((self.search_squared[orientation], index, orientation));
                 }
             }
+            report(SearchPhase::Screening, index + 1, nodes.len());
         }
         let order = |a: &(f64, usize, usize), b: &(f64, usize, usize)| {
             a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2))
@@ -563,7 +579,8 @@ impl<'a> Servo<'a> {
             Vec::with_capacity(screened.len());
         let mut descent_iterations = 0;
         let mut history = Vec::new();
-        for &(_, index, orientation) in &screened {
+        for (done, &(_, index, orientation)) in screened.iter().enumerate() {
+            report(SearchPhase::Descents, done, screened.len());
             let mut pose = node_pose(index, orientation);
             history.clear();
             let mut coefficients = self.vignetting_start;
@@ -612,7 +629,9 @@ impl<'a> Servo<'a> {
         // Refinements at full resolution: the lowest final cost wins.
         let mut best: Option<(usize, Outcome)> = None;
         let mut refined_costs = Vec::with_capacity(kept.len());
+        report(SearchPhase::Descents, screened.len(), screened.len());
         for (rank, &(_, pose)) in kept.iter().enumerate() {
+            report(SearchPhase::Refinements, rank, kept.len());
             let mut outcome = self.run_methods(&[settings.refine_method], desired, pose)?;
             let outcome = outcome.pop().expect("one outcome per method");
             let cost = match outcome.stop {
@@ -629,6 +648,7 @@ impl<'a> Servo<'a> {
                 best = Some((rank, outcome));
             }
         }
+        report(SearchPhase::Refinements, kept.len(), kept.len());
         let (chosen_rank, mut outcome) = best.expect("at least one refinement");
         let (chosen, chosen_orientation) = kept[chosen_rank].0;
         let chosen_node_m = nodes.get(chosen).copied();

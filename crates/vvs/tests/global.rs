@@ -2,7 +2,7 @@
 //! convergence on renderings of the synthetic city with known ground truth.
 
 use frame::AnyImage;
-use vvs::{Method, PriorBox, Servo, StopReason, VvsConfig};
+use vvs::{Method, PriorBox, SearchPhase, Servo, StopReason, VvsConfig};
 
 use crate::common::*;
 
@@ -199,6 +199,43 @@ fn global_beside_other_methods_is_what_it_is_alone() {
         );
         assert_eq!(outcome.search.is_some(), *method == Method::Global);
     }
+}
+
+/// A search tells where it stands: its phases in order, each counted up to its total
+/// (the totals those of its report), and the same outcome as without a callback.
+#[test]
+fn global_reports_its_progress_phase_by_phase() {
+    let prior = PriorBox {
+        translation_m: [1.0, 0.5, 0.3],
+        rotation_deg: [2.0; 3],
+    };
+    let (mut servo, desired) = servo_with(VvsConfig::default());
+    let start = offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]);
+    let mut events = Vec::new();
+    let outcome = servo
+        .localize_in_box_with_progress(&desired, start, &prior, &mut |p| events.push(p))
+        .unwrap();
+    let alone = servo.localize_in_box(&desired, start, &prior).unwrap();
+    assert_eq!(outcome.world_from_camera, alone.world_from_camera);
+    let search = outcome.search.unwrap();
+    let phases = [
+        (SearchPhase::Screening, search.candidates),
+        (SearchPhase::Descents, search.descents),
+        (SearchPhase::Refinements, search.refinements),
+    ];
+    let mut at = 0;
+    for (phase, total) in phases {
+        let of_phase: Vec<_> = events[at..]
+            .iter()
+            .take_while(|p| p.phase == phase)
+            .collect();
+        assert!(!of_phase.is_empty(), "{phase:?} not reported");
+        assert!(of_phase.iter().all(|p| p.total == total), "{phase:?}");
+        assert!(of_phase.windows(2).all(|w| w[0].done <= w[1].done));
+        assert_eq!(of_phase.last().unwrap().done, total, "{phase:?}");
+        at += of_phase.len();
+    }
+    assert_eq!(at, events.len(), "events after the refinements");
 }
 
 /// From inside the box, off every grid node (the truth is not at a corner).
