@@ -63,7 +63,9 @@ commands:
                        andyzeng/tsdf-fusion-python; non-commercial licence, never
                        committed): localisation near the map and in a held-out block, a
                        global search, tracking, the queries resampled to a catadioptric
-                       camera. Results in results/real/<name>/ (summary.md, runs.csv,
+                       camera; and again with the structure-from-motion poses of
+                       Brachmann et al. (ICCV 2021) when DIR holds
+                       sfm_redkitchen_train.txt. Results in results/real/<name>/ (summary.md, runs.csv,
                        tracking.csv, plots, pictures/). --quick: the house's CI subset.
 
   All build bench-conv in release mode for this machine's instruction set

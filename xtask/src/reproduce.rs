@@ -214,6 +214,16 @@ repository andyzeng/tsdf-fusion-python: `git clone --depth 1 \
 https://github.com/andyzeng/tsdf-fusion-python` and pass \
 `--seven-scenes tsdf-fusion-python/data`";
 
+/// The structure-from-motion poses of 7-Scenes redkitchen, in the frames' folder.
+const SFM_POSES: &str = "sfm_redkitchen_train.txt";
+
+/// How to get them.
+const SFM_HELP: &str = "the structure-from-motion pseudo ground truth of 7-Scenes \
+(Brachmann et al., ICCV 2021; same licence as 7-Scenes) is the file \
+pgt/sfm/7scenes/redkitchen_train.txt of the GitHub repository \
+tsattler/visloc_pseudo_gt_limitations: copy it into the 7-Scenes folder as \
+sfm_redkitchen_train.txt";
+
 /// The shared data folder: `PGM_DATA_DIR`, else `../shared/data` beside the checkout.
 fn data_dir() -> std::path::PathBuf {
     std::env::var_os("PGM_DATA_DIR")
@@ -254,6 +264,15 @@ pub fn real(
                 dir.display()
             );
             runs.push(("bench-redkitchen.toml", dir.to_path_buf(), "redkitchen"));
+            if dir.join(SFM_POSES).is_file() {
+                runs.push((
+                    "bench-redkitchen-sfm.toml",
+                    dir.to_path_buf(),
+                    "redkitchen-sfm",
+                ));
+            } else {
+                eprintln!("7-Scenes with structure-from-motion poses skipped: {SFM_HELP}.");
+            }
         }
         None if !quick => eprintln!("7-Scenes skipped: {SEVEN_SCENES_HELP}."),
         None => {}

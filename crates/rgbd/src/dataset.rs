@@ -18,6 +18,11 @@
 //! of = "depth"                             # the camera the poses place: "color" or "depth"
 //! # kind = "lines": one line per frame from `frames`' first, `tx ty tz qx qy qz qw`
 //! # (or TUM's `timestamp tx ty tz qx qy qz qw`); `#` starts a comment
+//! # kind = "colmap": COLMAP's `images.txt` layout, `NAME qw qx qy qz tx ty tz ...`
+//! # placing the world in the camera (`camera_from_world`); lines are matched to
+//! # frames by `name = "seq-01/frame-{:06}.color.png"`, others are skipped; an
+//! # optional `scale` (metres per unit of the file, default 1) scales the
+//! # translations, for poses from structure from motion
 //! ```
 //!
 //! The pictures and pose files are relative to the data folder given to
@@ -64,8 +69,25 @@ struct DatasetFile {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields, tag = "kind", rename_all = "snake_case")]
 enum PosesFile {
-    Matrix { path: String, of: PoseOf },
-    Lines { path: String, of: PoseOf },
+    Matrix {
+        path: String,
+        of: PoseOf,
+    },
+    Lines {
+        path: String,
+        of: PoseOf,
+    },
+    Colmap {
+        path: String,
+        of: PoseOf,
+        name: String,
+        #[serde(default = "unit_scale")]
+        scale: f64,
+    },
+}
+
+fn unit_scale() -> f64 {
+    1.0
 }
 
 /// A described folder of RGB-D frames.
@@ -272,6 +294,77 @@ fn read_pose_lines(path: &Path) -> Result<Vec<Isometry3>, RgbdError> {
         .collect()
 }
 
+/// Poses in COLMAP's layout (`NAME qw qx qy qz tx ty tz ...`, `camera_from_world`)
+/// of the frames `first..=last`, matched by `name` (a frame pattern); lines of other
+/// names are skipped; translations multiplied by `scale`. Returns `world_from_camera`,
+/// or the first frame without a line.
+fn read_colmap(
+    path: &Path,
+    name: &str,
+    scale: f64,
+    first: u64,
+    last: u64,
+) -> Result<Vec<Isometry3>, RgbdError> {
+    let bad = |line: usize, message: String| RgbdError::Pose {
+        path: path.to_owned(),
+        line,
+        message,
+    };
+    let count = (last - first + 1) as usize;
+    let mut by_name = std::collections::HashMap::with_capacity(count);
+    for k in first..=last {
+        by_name.insert(frame_path(name, k)?, (k - first) as usize);
+    }
+    let mut poses: Vec<Option<Isometry3>> = vec![None; count];
+    let text = read_text(path)?;
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("");
+        let mut words = line.split_whitespace();
+        let Some(slot) = words.next().and_then(|w| by_name.get(w)) else {
+            continue;
+        };
+        let v: Vec<f64> = words
+            .take(7)
+            .map(str::parse::<f64>)
+            .collect::<Result<_, _>>()
+            .map_err(|e| bad(i + 1, format!("not a number ({e})")))?;
+        if v.len() < 7 {
+            return Err(bad(
+                i + 1,
+                format!(
+                    "{} numbers after the name, expected `qw qx qy qz tx ty tz`",
+                    v.len()
+                ),
+            ));
+        }
+        let q = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
+        let t = DVec3::new(v[4], v[5], v[6]) * scale;
+        let norm = q.length();
+        if !(t.is_finite() && norm.is_finite() && (norm - 1.0).abs() < 0.05) {
+            return Err(bad(i + 1, format!("not a pose (quaternion norm {norm})")));
+        }
+        if poses[*slot].is_some() {
+            return Err(bad(i + 1, "a second pose of the same picture".into()));
+        }
+        let camera_from_world = Isometry3::from_rotation_translation(q.normalize(), t);
+        poses[*slot] = Some(camera_from_world.inverse());
+    }
+    poses
+        .into_iter()
+        .enumerate()
+        .map(|(k, p)| {
+            p.ok_or_else(|| RgbdError::MissingPose {
+                frame: first + k as u64,
+                path: path.to_owned(),
+                available: format!(
+                    "no line named `{}`",
+                    frame_path(name, first + k as u64).unwrap_or_default()
+                ),
+            })
+        })
+        .collect()
+}
+
 impl RgbdDataset {
     /// Read a dataset description (`description`, TOML) of the frames under
     /// `data_dir`, with every pose (checked now, so that a bad pose file fails before
@@ -343,10 +436,27 @@ impl RgbdDataset {
                 (poses, *of)
             }
             PosesFile::Lines { path, of } => (read_pose_lines(&root.join(path))?, *of),
+            PosesFile::Colmap {
+                path,
+                of,
+                name,
+                scale,
+            } => {
+                frame_path(name, first).map_err(|e| bad(e.to_string()))?;
+                if !(*scale > 0.0 && scale.is_finite()) {
+                    return Err(bad(format!("[poses] scale must be > 0, got {scale}")));
+                }
+                (
+                    read_colmap(&root.join(path), name, *scale, first, last)?,
+                    *of,
+                )
+            }
         };
         if poses.len() < count {
             let path = match &file.poses {
-                PosesFile::Matrix { path, .. } | PosesFile::Lines { path, .. } => root.join(path),
+                PosesFile::Matrix { path, .. }
+                | PosesFile::Lines { path, .. }
+                | PosesFile::Colmap { path, .. } => root.join(path),
             };
             return Err(RgbdError::MissingPose {
                 frame: first + poses.len() as u64,

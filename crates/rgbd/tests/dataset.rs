@@ -91,6 +91,17 @@ fn tum_line(pose: &Isometry3) -> String {
     )
 }
 
+/// A COLMAP `images.txt` line of `world_from_camera` (it writes `camera_from_world`),
+/// translations divided by `scale`.
+fn colmap_line(name: &str, pose: &Isometry3, scale: f64) -> String {
+    let inverse = pose.inverse();
+    let (t, q) = (inverse.translation / scale, inverse.rotation);
+    format!(
+        "{name} {:.12} {:.12} {:.12} {:.12} {:.12} {:.12} {:.12} 525.5\n",
+        q.w, q.x, q.y, q.z, t.x, t.y, t.z
+    )
+}
+
 fn options() -> FuseOptions {
     FuseOptions {
         voxel_size_m: 0.02,
@@ -144,11 +155,19 @@ fn both_pose_formats_give_the_poses_and_the_same_cloud_on_any_thread_count() {
     files.push(("poses.txt", lines));
     files.push(("tum.txt", tum));
     files.push(("all.txt", poses().iter().map(matrix_text).collect()));
+    // COLMAP's layout: out of order, among other pictures' lines, in units of 2 m.
+    let mut colmap = String::from("# IMAGE_ID QW QX QY QZ TX TY TZ\n");
+    for (k, p) in poses().iter().enumerate().rev() {
+        colmap += &colmap_line(&format!("seq/f{}.png", 10 + k), p, 2.0);
+        colmap += &colmap_line(&format!("other/f{}.png", 10 + k), &Isometry3::IDENTITY, 1.0);
+    }
+    files.push(("images.txt", colmap));
     let sections = [
         "[poses]\nkind = \"matrix\"\npath = \"pose-{:02}.txt\"\nof = \"color\"\n",
         "[poses]\nkind = \"matrix\"\npath = \"all.txt\"\nof = \"depth\"\n",
         "[poses]\nkind = \"lines\"\npath = \"poses.txt\"\nof = \"color\"\n",
         "[poses]\nkind = \"lines\"\npath = \"tum.txt\"\nof = \"depth\"\n",
+        "[poses]\nkind = \"colmap\"\npath = \"images.txt\"\nof = \"color\"\nname = \"seq/f{}.png\"\nscale = 2.0\n",
     ];
     let mut clouds = Vec::new();
     for section in sections {
@@ -267,6 +286,25 @@ fn bad_descriptions_and_pose_files_are_typed_errors() {
             "[poses]\nkind = \"matrix\"\npath = \"all.txt\"\nof = \"color\"\n"
         };
         let description = write_dataset(&dir, section, &[(name, text.clone())]);
+        let error = RgbdDataset::load(&description, dir.join("data")).unwrap_err();
+        assert!(
+            matches!(
+                error,
+                RgbdError::Pose { .. } | RgbdError::MissingPose { .. }
+            ),
+            "{text:?}: {error}"
+        );
+    }
+    // COLMAP lines: a frame without its line, a picture given twice, a short line.
+    let line = |k: usize| colmap_line(&format!("f{}.png", 10 + k), &poses()[k], 1.0);
+    let all: String = (0..4).map(line).collect();
+    for text in [
+        (0..3).map(line).collect::<String>(),
+        all.clone() + &line(2),
+        (1..4).map(line).collect::<String>() + "f10.png 1 0 0\n",
+    ] {
+        let section = "[poses]\nkind = \"colmap\"\npath = \"images.txt\"\nof = \"color\"\nname = \"f{}.png\"\n";
+        let description = write_dataset(&dir, section, &[("images.txt", text.clone())]);
         let error = RgbdDataset::load(&description, dir.join("data")).unwrap_err();
         assert!(
             matches!(
