@@ -26,8 +26,9 @@
 //!    [`turned`]); a tilt leaves part of the field unobserved, and only the samples
 //!    farther than 2λ from it are compared. The [`GlobalConfig::screened`] best
 //!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
-//!    and are ranked again by their cost; descents that end within
-//!    [`GlobalConfig::merge_distance_m`] of a better one are dropped as duplicates.
+//!    and are ranked again by their cost; descents that end outside the box (grown by
+//!    a grid spacing and [`BOX_MARGIN_DEG`], [`PriorBox::holds`]) are dropped, and those
+//!    that end within [`GlobalConfig::merge_distance_m`] of a better one as duplicates.
 //! 3. **Refinement.** The [`GlobalConfig::refined`] best run
 //!    [`GlobalConfig::refine_method`] at full resolution; the outcome with the lowest
 //!    final cost wins (a diverged one only when every one diverged; if every node
@@ -60,6 +61,10 @@ use serde::{Deserialize, Serialize};
 use ucm::{Camera, Isometry3};
 
 use crate::{Method, VvsError};
+
+/// Degrees a descent may end beyond the prior box's rotations and still be ranked
+/// ([`PriorBox::holds`]; its translations may end a grid spacing beyond).
+pub const BOX_MARGIN_DEG: f64 = 5.0;
 
 /// The prior region of a global localisation: how far the initial pose may be from the
 /// truth. It is the error model of the paper's protocol: `initial = truth · (t, θw)`
@@ -112,6 +117,26 @@ impl PriorBox {
             ));
         }
         Ok(())
+    }
+
+    /// Whether `pose` (`world_from_camera`) could be the truth of a search started at
+    /// `initial`: the offset `(t, θw) = pose⁻¹ · initial` within the box grown by
+    /// `margin_m` (per axis) and `margin_deg` (any heading at 180°).
+    pub fn holds(
+        &self,
+        initial: &Isometry3,
+        pose: &Isometry3,
+        margin_m: [f64; 3],
+        margin_deg: f64,
+    ) -> bool {
+        let offset = (pose.inverse() * *initial).to_pose_vector();
+        let within_translation = (0..3)
+            .all(|k| offset[k].abs() <= self.translation_m[k] + margin_m[k]);
+        let within_rotation = (0..3).all(|k| {
+            (k == 2 && self.rotation_deg[2] >= 180.0)
+                || offset[3 + k].abs().to_degrees() <= self.rotation_deg[k] + margin_deg
+        });
+        within_translation && within_rotation
     }
 
     /// The half-extents, along the initial camera's axes, of the positions the truth

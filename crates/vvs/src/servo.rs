@@ -603,7 +603,15 @@ impl<'a> Servo<'a> {
                 }
                 _ => result.cost,
             };
-            if !matches!(result.stop, StopReason::Diverged(_)) && rank.is_finite() {
+            // A descent that left the box (grown by a grid spacing and a few degrees)
+            // found something else than the truth the box holds.
+            let in_box = prior.holds(
+                &initial,
+                &pose,
+                settings.grid_spacing_m,
+                crate::global::BOX_MARGIN_DEG,
+            );
+            if !matches!(result.stop, StopReason::Diverged(_)) && rank.is_finite() && in_box {
                 descended.push((rank, (index, orientation), pose));
             }
         }

@@ -62,6 +62,16 @@ fn the_grid_covers_every_truth_of_the_box() {
                 "draw {i}: {p} outside {extent:?}"
             );
         }
+        // The box holds the truth of every initial pose it describes, and not one
+        // beyond it on any axis.
+        let truth = ucm::Isometry3::from_pose_vector([3.0, -1.0, 2.0, 0.1, -0.2, 1.0]).unwrap();
+        let initial = truth * ucm::Isometry3::from_pose_vector(r).unwrap();
+        assert!(prior.holds(&initial, &truth, [1e-9; 3], 1e-9), "draw {i}");
+        let k = i % 6;
+        let mut beyond = r;
+        beyond[k] = 1.2 * PAPER_CORNER[k] * if r[k] < 0.0 { -1.0 } else { 1.0 };
+        let initial = truth * ucm::Isometry3::from_pose_vector(beyond).unwrap();
+        assert!(!prior.holds(&initial, &truth, [1e-9; 3], 1e-9), "draw {i}, axis {k}");
     }
     // A box without translation has one node, at the initial position.
     let still = PriorBox {
