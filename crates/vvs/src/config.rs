@@ -132,6 +132,11 @@ pub struct VvsConfig {
     /// them: rendering noise keeps the update above the thresholds above once the
     /// pose has settled (or is stuck). 0 turns the test off.
     pub stall_window: usize,
+    /// The stall test's window in step 1's stages when a step 2 follows (`None`:
+    /// `stall_window`): those stages only bring the pose into the next one's basin,
+    /// which takes fewer iterations than settling at the optimum. 0 turns the test
+    /// off there.
+    pub intermediate_stall_window: Option<usize>,
     /// Relative decrease of the cost the last `stall_window` iterations must achieve.
     pub stall_relative_decrease: f64,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
@@ -198,6 +203,7 @@ impl Default for VvsConfig {
             converged_translation_m: 2e-5,
             converged_rotation_rad: 2e-5,
             stall_window: 10,
+            intermediate_stall_window: None,
             stall_relative_decrease: 0.01,
             divergence_cost_factor: 1e3,
             min_hit_fraction: 0.02,

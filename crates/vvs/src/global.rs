@@ -130,8 +130,8 @@ impl PriorBox {
         margin_deg: f64,
     ) -> bool {
         let offset = (pose.inverse() * *initial).to_pose_vector();
-        let within_translation = (0..3)
-            .all(|k| offset[k].abs() <= self.translation_m[k] + margin_m[k]);
+        let within_translation =
+            (0..3).all(|k| offset[k].abs() <= self.translation_m[k] + margin_m[k]);
         let within_rotation = (0..3).all(|k| {
             (k == 2 && self.rotation_deg[2] >= 180.0)
                 || offset[3 + k].abs().to_degrees() <= self.rotation_deg[k] + margin_deg

@@ -90,9 +90,11 @@ pub struct Localizer {
     /// (`levenberg_marquardt = 0.1`: half the iterations of the paper's gain of 0.2),
     /// and step 1 continued at λ* = 7.5 then 3 pixels after 15 (`lambda_schedule`:
     /// on a real picture the widest PGM's optimum is centimetres from the picture's, and
-    /// step 2 at λ = 1 does not come back from every such start); the same
-    /// convergence domain on the synthetic city (`docs/RESULTS.md`, "Real pictures").
-    /// No per-iteration history.
+    /// step 2 at λ = 1 does not come back from every such start), each of step 1's
+    /// stages ended after 3 iterations without a 1 % decrease
+    /// (`intermediate_stall_window`: they only bring the pose into the next stage's
+    /// basin; step 2 keeps 10); the same convergence domain on the synthetic city
+    /// (`docs/RESULTS.md`, "Real pictures"). No per-iteration history.
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2).
     pub method: Method,
@@ -111,6 +113,7 @@ impl Default for Localizer {
                 gain: 1.0,
                 levenberg_marquardt: Some(0.1),
                 lambda_schedule: vec![7.5, 3.0],
+                intermediate_stall_window: Some(3),
                 keep_history: false,
                 ..VvsConfig::default()
             },

@@ -37,6 +37,9 @@ struct Planned {
     /// step's budget has left.
     cap: usize,
     last_of_step: bool,
+    /// The stall test's window for this stage (`VvsConfig::stall_window`, or
+    /// `intermediate_stall_window` for step 1's stages before a step 2).
+    stall_window: usize,
 }
 
 /// How a stage ended: why, with which λ and cost, after how many iterations.
@@ -243,6 +246,7 @@ impl<'a> Servo<'a> {
                 level: 0,
                 cap: c.max_iterations,
                 last_of_step: true,
+                stall_window: c.stall_window,
             }];
         }
         let first_lambda_factor = if method == Method::Rule0 {
@@ -279,6 +283,7 @@ impl<'a> Servo<'a> {
                     c.step1_max_iterations / n
                 },
                 last_of_step: i + 1 == n,
+                stall_window: c.intermediate_stall_window.unwrap_or(c.stall_window),
             })
             .collect();
         planned.push(Planned {
@@ -291,6 +296,7 @@ impl<'a> Servo<'a> {
             level: 0,
             cap: c.max_iterations - c.step1_max_iterations,
             last_of_step: true,
+            stall_window: c.stall_window,
         });
         planned
     }
@@ -574,6 +580,7 @@ impl<'a> Servo<'a> {
             level: search,
             cap: settings.descent_iterations,
             last_of_step: true,
+            stall_window: self.config.stall_window,
         };
         let mut descended: Vec<(f64, (usize, usize), Isometry3)> =
             Vec::with_capacity(screened.len());
@@ -975,6 +982,7 @@ impl<'a> Servo<'a> {
             stage,
             step: stage_number,
             level,
+            stall_window,
             ..
         } = planned;
         let Level {
@@ -1185,7 +1193,7 @@ impl<'a> Servo<'a> {
             self.costs.push(cost);
             if stalled(
                 &self.costs,
-                self.config.stall_window,
+                stall_window,
                 self.config.stall_relative_decrease,
             ) {
                 return Ok(StageResult {

@@ -71,7 +71,10 @@ fn the_grid_covers_every_truth_of_the_box() {
         let mut beyond = r;
         beyond[k] = 1.2 * PAPER_CORNER[k] * if r[k] < 0.0 { -1.0 } else { 1.0 };
         let initial = truth * ucm::Isometry3::from_pose_vector(beyond).unwrap();
-        assert!(!prior.holds(&initial, &truth, [1e-9; 3], 1e-9), "draw {i}, axis {k}");
+        assert!(
+            !prior.holds(&initial, &truth, [1e-9; 3], 1e-9),
+            "draw {i}, axis {k}"
+        );
     }
     // A box without translation has one node, at the initial position.
     let still = PriorBox {
