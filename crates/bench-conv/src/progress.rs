@@ -14,6 +14,8 @@ pub struct Progress {
     /// Plain-text mode: the start time and the last 5 % step printed.
     plain: Option<(Instant, Mutex<u64>)>,
     unit: &'static str,
+    /// Plain-text mode: when the last note was printed.
+    last_note: Mutex<Option<Instant>>,
 }
 
 impl Progress {
@@ -28,7 +30,12 @@ impl Progress {
             .progress_chars("=> "),
         );
         let plain = (!std::io::stderr().is_terminal()).then(|| (Instant::now(), Mutex::new(0)));
-        Self { bar, plain, unit }
+        Self {
+            bar,
+            plain,
+            unit,
+            last_note: Mutex::new(None),
+        }
     }
 
     /// Count `n` more units done; `message` follows the count (e.g. "3 successes").
@@ -53,6 +60,20 @@ impl Progress {
                 clock(elapsed),
                 clock(eta)
             );
+        }
+    }
+
+    /// Say what a long unit is doing (a global search's phase): beside the bar on a
+    /// terminal, as a line at most every 10 s in a log.
+    pub fn note(&self, message: &str) {
+        if self.plain.is_none() {
+            self.bar.set_message(message.to_string());
+            return;
+        }
+        let mut last = self.last_note.lock().unwrap_or_else(|e| e.into_inner());
+        if last.is_none_or(|at| at.elapsed().as_secs_f64() >= 10.0) {
+            *last = Some(Instant::now());
+            eprintln!("{message}");
         }
     }
 

@@ -118,7 +118,7 @@ pub fn run_protocol(
         methods: &methods,
         scene_name,
         desired_images: &desired_images,
-        bar: Progress::new(runs.len() as u64, "runs"),
+        bar: std::sync::Arc::new(Progress::new(runs.len() as u64, "runs")),
         successes: Mutex::new(0),
     };
     let mut records = if protocol.offsets.adaptive {
@@ -198,7 +198,7 @@ struct Shared<'a> {
     methods: &'a [MethodConfig],
     scene_name: &'a str,
     desired_images: &'a [frame::Frame],
-    bar: Progress,
+    bar: std::sync::Arc<Progress>,
     successes: Mutex<usize>,
 }
 
@@ -253,7 +253,18 @@ impl Shared<'_> {
                                 parallel: parallel_images,
                                 ..first.config.clone()
                             };
-                            servos.push((job[0].method, Servo::new(cloud, camera, config)?));
+                            let mut servo = Servo::new(cloud, camera, config)?;
+                            // A global search can take seconds: its phases beside the bar.
+                            let bar = std::sync::Arc::clone(&self.bar);
+                            servo.set_search_progress(Some(Box::new(move |p| {
+                                bar.note(&format!(
+                                    "global search: {} {}/{}",
+                                    p.phase.name(),
+                                    p.done,
+                                    p.total
+                                ));
+                            })));
+                            servos.push((job[0].method, servo));
                             servos.len() - 1
                         }
                     };

@@ -20,5 +20,5 @@ pub use global::{
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;
-pub use servo::{MAX_SERVO_PIXELS, SERVO_BYTES_PER_PIXEL, Servo};
+pub use servo::{MAX_SERVO_PIXELS, SERVO_BYTES_PER_PIXEL, SearchProgressFn, Servo};
 pub use track::{Prediction, Recovery, TrackReport, TrackedFrame, Tracker};

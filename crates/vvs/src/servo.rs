@@ -127,6 +127,22 @@ pub const MAX_SERVO_PIXELS: u64 = 1 << 22;
 /// took 3.7 GB).
 pub const SERVO_BYTES_PER_PIXEL: u64 = 220;
 
+/// A callback given a global search's progress ([`Servo::set_search_progress`]).
+pub type SearchProgressFn = Box<dyn FnMut(SearchProgress) + Send>;
+
+/// [`SearchProgressFn`], optional, shown by `Debug` as whether it is set.
+struct ProgressHook(Option<SearchProgressFn>);
+
+impl std::fmt::Debug for ProgressHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "ProgressHook({})",
+            if self.0.is_some() { "set" } else { "unset" }
+        )
+    }
+}
+
 /// The optimiser for one cloud and camera, owning every buffer (no allocation per
 /// iteration once warm).
 #[derive(Debug)]
@@ -152,6 +168,8 @@ pub struct Servo<'a> {
     /// PGMs' mean squared difference over the compared samples, divided by the
     /// fraction of the picture compared) beside the correlation's in the costs.
     search_squared: Vec<f64>,
+    /// Called as a global search goes on, when set.
+    search_progress: ProgressHook,
     rows9: Vec<[f32; 9]>,
     columns: [Vec<f32>; 2],
     vignetting_start: [f64; 2],
@@ -197,6 +215,7 @@ impl<'a> Servo<'a> {
             search_masked: Vec::new(),
             search_pictures: Vec::new(),
             search_squared: Vec::new(),
+            search_progress: ProgressHook(None),
             rows9: Vec::new(),
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
@@ -363,7 +382,24 @@ impl<'a> Servo<'a> {
         initial: Isometry3,
         prior: &PriorBox,
     ) -> Result<Outcome, VvsError> {
-        self.localize_in_box_with_progress(desired, initial, prior, &mut |_| ())
+        // The callback of `set_search_progress`, if any (taken out while the search
+        // borrows the servo, put back after).
+        let mut hook = self.search_progress.0.take();
+        let result = match &mut hook {
+            Some(progress) => {
+                self.localize_in_box_with_progress(desired, initial, prior, &mut **progress)
+            }
+            None => self.localize_in_box_with_progress(desired, initial, prior, &mut |_| ()),
+        };
+        self.search_progress.0 = hook;
+        result
+    }
+
+    /// Call `progress` as every later global search of this servo goes on
+    /// ([`Method::Global`] among [`Servo::run_methods`]' methods, or
+    /// [`Servo::localize_in_box`]); `None` stops it.
+    pub fn set_search_progress(&mut self, progress: Option<SearchProgressFn>) {
+        self.search_progress.0 = progress;
     }
 
     /// [`Servo::localize_in_box`], calling `progress` after each node screened, each

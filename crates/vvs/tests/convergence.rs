@@ -256,21 +256,21 @@ fn run_methods_shares_step1_without_changing_any_outcome() {
 /// place as step 1 run with the full window, in fewer iterations; step 2 keeps its own.
 #[test]
 fn a_short_stall_window_in_step_one_ends_at_the_same_place_sooner() {
-    let full = vvs::VvsConfig {
+    let full = VvsConfig {
         intermediate_stall_window: None,
         keep_history: false,
         ..vvs::Localizer::default().config
     };
-    let short = vvs::VvsConfig {
+    let short = VvsConfig {
         intermediate_stall_window: Some(3),
         ..full.clone()
     };
-    let mut servo = vvs::Servo::new(&city().cloud, &fixture(), full.clone()).unwrap();
+    let mut servo = Servo::new(&city().cloud, &fixture(), full.clone()).unwrap();
     let desired = servo.render(&desired_pose()).unwrap();
     let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
-    let a = servo.run(vvs::Method::Rule2, &desired, start).unwrap();
-    let mut servo = vvs::Servo::new(&city().cloud, &fixture(), short).unwrap();
-    let b = servo.run(vvs::Method::Rule2, &desired, start).unwrap();
+    let a = servo.run(Method::Rule2, &desired, start).unwrap();
+    let mut servo = Servo::new(&city().cloud, &fixture(), short).unwrap();
+    let b = servo.run(Method::Rule2, &desired, start).unwrap();
     let (ta, _) = a.world_from_camera.distance_to(&desired_pose());
     let (tb, _) = b.world_from_camera.distance_to(&desired_pose());
     eprintln!(

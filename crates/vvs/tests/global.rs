@@ -249,6 +249,28 @@ fn global_reports_its_progress_phase_by_phase() {
         at += of_phase.len();
     }
     assert_eq!(at, events.len(), "events after the refinements");
+    // The same events from a callback set on the servo, for Method::Global among
+    // run_methods' methods; none once it is unset.
+    let config = VvsConfig {
+        global: vvs::GlobalConfig {
+            prior: prior.clone(),
+            ..VvsConfig::default().global
+        },
+        keep_history: false,
+        ..VvsConfig::default()
+    };
+    let mut servo = Servo::new(&city().cloud, &fixture(), config).unwrap();
+    let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let sink = std::sync::Arc::clone(&seen);
+    servo.set_search_progress(Some(Box::new(move |p| sink.lock().unwrap().push(p))));
+    let together = servo
+        .run_methods(&[Method::Global, Method::Rule2], &desired, start)
+        .unwrap();
+    assert_eq!(together[0].world_from_camera, alone.world_from_camera);
+    assert_eq!(*seen.lock().unwrap(), events);
+    servo.set_search_progress(None);
+    servo.localize_in_box(&desired, start, &prior).unwrap();
+    assert_eq!(seen.lock().unwrap().len(), events.len());
 }
 
 /// From inside the box, off every grid node (the truth is not at a corner).
