@@ -263,6 +263,7 @@ fn frame_name_patterns() {
 fn bad_descriptions_and_pose_files_are_typed_errors() {
     let dir = temp_dir("bad");
     let good_lines = poses().iter().map(tum_line).collect::<String>();
+    let colmap = |k: usize| colmap_line(&format!("f{}.png", 10 + k), &poses()[k], 1.0);
     let cases: Vec<(&str, String)> = vec![
         // Too few poses for the frames.
         ("poses.txt", poses()[..2].iter().map(tum_line).collect()),
@@ -278,33 +279,23 @@ fn bad_descriptions_and_pose_files_are_typed_errors() {
         ("all.txt", "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 1 1\n".repeat(4)),
         // A ragged matrix.
         ("all.txt", "1 0 0 0\n0 1 0\n".into()),
+        // COLMAP lines: a frame without its line, a picture given twice, a short line.
+        ("images.txt", (0..3).map(colmap).collect()),
+        ("images.txt", (0..4).chain([2]).map(colmap).collect()),
+        (
+            "images.txt",
+            (1..4).map(colmap).collect::<String>() + "f10.png 1 0 0\n",
+        ),
     ];
     for (name, text) in cases {
-        let section = if name == "poses.txt" {
-            "[poses]\nkind = \"lines\"\npath = \"poses.txt\"\nof = \"color\"\n"
-        } else {
-            "[poses]\nkind = \"matrix\"\npath = \"all.txt\"\nof = \"color\"\n"
+        let section = match name {
+            "poses.txt" => "[poses]\nkind = \"lines\"\npath = \"poses.txt\"\nof = \"color\"\n",
+            "all.txt" => "[poses]\nkind = \"matrix\"\npath = \"all.txt\"\nof = \"color\"\n",
+            _ => {
+                "[poses]\nkind = \"colmap\"\npath = \"images.txt\"\nof = \"color\"\nname = \"f{}.png\"\n"
+            }
         };
         let description = write_dataset(&dir, section, &[(name, text.clone())]);
-        let error = RgbdDataset::load(&description, dir.join("data")).unwrap_err();
-        assert!(
-            matches!(
-                error,
-                RgbdError::Pose { .. } | RgbdError::MissingPose { .. }
-            ),
-            "{text:?}: {error}"
-        );
-    }
-    // COLMAP lines: a frame without its line, a picture given twice, a short line.
-    let line = |k: usize| colmap_line(&format!("f{}.png", 10 + k), &poses()[k], 1.0);
-    let all: String = (0..4).map(line).collect();
-    for text in [
-        (0..3).map(line).collect::<String>(),
-        all.clone() + &line(2),
-        (1..4).map(line).collect::<String>() + "f10.png 1 0 0\n",
-    ] {
-        let section = "[poses]\nkind = \"colmap\"\npath = \"images.txt\"\nof = \"color\"\nname = \"f{}.png\"\n";
-        let description = write_dataset(&dir, section, &[("images.txt", text.clone())]);
         let error = RgbdDataset::load(&description, dir.join("data")).unwrap_err();
         assert!(
             matches!(
