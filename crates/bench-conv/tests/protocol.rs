@@ -73,6 +73,7 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
         "ablations/wide-street.toml",
         "ablations/camera-4.5m.toml",
         "ablations/seed2.toml",
+        "ablations/localizer-stall-window.toml",
     ] {
         let p = Protocol::load(&root().join("fixtures").join(name)).unwrap();
         assert!(!p.runs(true).unwrap().is_empty());

@@ -549,6 +549,7 @@ impl Benchmark {
         &self,
         job: &Job,
         local_clouds: &HashMap<(usize, String), PointCloud>,
+        progress: &Progress,
     ) -> anyhow::Result<(Outcome, String)> {
         let q = &self.queries[job.query];
         let cloud = &self.clouds[q.cloud];
@@ -573,10 +574,20 @@ impl Benchmark {
             let settings = self.spec.global.as_ref().expect("global settings");
             let mut config = BenchMethod::parse("localizer")?.config();
             config.global.grid_spacing_m = settings.grid_spacing_m;
-            let outcome = Servo::new(cloud, camera, config)?.localize_in_box(
+            // A search here takes tens of seconds: its phase beside the bar.
+            let outcome = Servo::new(cloud, camera, config)?.localize_in_box_with_progress(
                 picture,
                 job.initial,
                 &settings.prior,
+                &mut |p| {
+                    progress.note(&format!(
+                        "query {}: global search, {} {}/{}",
+                        q.frame,
+                        p.phase.name(),
+                        p.done,
+                        p.total
+                    ))
+                },
             )?;
             return Ok((outcome, "global".into()));
         }
@@ -606,7 +617,7 @@ impl Benchmark {
         let outcomes = jobs
             .par_iter()
             .map(|job| {
-                let result = self.run_job(job, &local_clouds);
+                let result = self.run_job(job, &local_clouds, &progress);
                 progress.inc(1, "");
                 result
             })
