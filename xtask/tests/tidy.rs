@@ -130,21 +130,53 @@ fn results_and_readme_stay_short() {
 }
 
 /// A crate depends only on what its concept needs: the pictures and the features never
-/// see the renderer, LAS/LAZ or the synthetic world (not even in their tests), the
-/// renderer never sees a feature, and xtask links none of the project's heavy crates.
+/// see the renderer, cloud files or the synthetic world (not even in their tests), the
+/// renderer never sees a feature or a file format, and xtask links none of the
+/// project's heavy crates.
 #[test]
 fn crates_depend_only_on_what_their_concept_needs() {
-    let forbidden: [(&str, &[&str]); 7] = [
+    let forbidden: [(&str, &[&str]); 8] = [
         (
             "crates/frame",
-            &["splat", "world", "las", "laz", "brightness", "pgm", "vvs"],
+            &[
+                "splat",
+                "world",
+                "las",
+                "laz",
+                "e57",
+                "cloud-io",
+                "brightness",
+                "pgm",
+                "vvs",
+            ],
         ),
         (
             "crates/brightness",
-            &["splat", "world", "las", "laz", "pgm", "vvs"],
+            &[
+                "splat", "world", "las", "laz", "e57", "cloud-io", "pgm", "vvs",
+            ],
         ),
-        ("crates/pgm", &["splat", "world", "las", "laz", "vvs"]),
-        ("crates/splat", &["brightness", "pgm", "vvs", "bench-conv"]),
+        (
+            "crates/pgm",
+            &["splat", "world", "las", "laz", "e57", "cloud-io", "vvs"],
+        ),
+        (
+            "crates/splat",
+            &[
+                "las",
+                "laz",
+                "e57",
+                "cloud-io",
+                "brightness",
+                "pgm",
+                "vvs",
+                "bench-conv",
+            ],
+        ),
+        (
+            "crates/cloud-io",
+            &["world", "frame", "brightness", "pgm", "vvs", "bench-conv"],
+        ),
         ("crates/world", &["brightness", "pgm", "vvs", "bench-conv"]),
         (
             "crates/rgbd",
@@ -156,6 +188,7 @@ fn crates_depend_only_on_what_their_concept_needs() {
                 "bench-conv",
                 "vvs",
                 "splat",
+                "cloud-io",
                 "pgm",
                 "faer",
                 "las",

@@ -3,7 +3,7 @@
 //! The `bench-conv` binary hosts the tools a user needs to look at data:
 //!
 //! * `bench-conv city --out city.las [--seed N] [--spacing-m S] [--textures DIR]`:
-//!   generate the synthetic city and write it as LAS/LAZ;
+//!   generate the synthetic city and write it as a cloud file (LAS, LAZ, PLY, E57);
 //! * `bench-conv render --camera CAM.toml (--cloud FILE.las | --city-seed N)
 //!   (--pose tx,ty,tz,θwx,θwy,θwz | --looking-down x,y,z,heading_deg) --out IMG.png`:
 //!   render a cloud at a pose, and report what was drawn.

@@ -13,7 +13,7 @@
 //! seed = 1
 //! spacing_m = 0.05
 //! # street_width_m = 12.0, clutter = true, facade_detail = true  (the ablations)
-//! # kind = "las", path = "cloud.laz"  # any LAS/LAZ file, relative to this file
+//! # kind = "file", path = "cloud.e57"  # a LAS, LAZ, PLY or E57 file, relative to this file
 //!
 //! [offsets]                           # in the desired camera's frame
 //! translation_m = [8.0, 2.0, 1.5]     # tX (along the street), tY (across), tZ (vertical)
@@ -126,15 +126,17 @@ pub enum Scene {
         #[serde(default = "yes")]
         facade_detail: bool,
     },
-    /// A LAS/LAZ file.
-    Las {
+    /// A cloud file (LAS, LAZ, PLY or E57, told apart by content): `kind = "file"`
+    /// (`"las"` is read as the same).
+    #[serde(alias = "las")]
+    File {
         /// Path, relative to the protocol file.
         path: PathBuf,
     },
 }
 
 impl Scene {
-    /// Generate the city or read the LAS/LAZ file (a relative path is resolved against
+    /// Generate the city or read the cloud file (a relative path is resolved against
     /// `base_dir`); returns the cloud and a short name of the scene. `sampling_seed`
     /// resamples the city's surfaces ([`world::city::CityParams::sampling_seed`]).
     pub fn load(
@@ -167,9 +169,9 @@ impl Scene {
                 );
                 Ok((city.cloud, format!("city-{seed}")))
             }
-            Scene::Las { path } => {
+            Scene::File { path } => {
                 let path = crate::resolve(base_dir, path);
-                let (cloud, _) = splat::read_las(&path)
+                let (cloud, _, _) = cloud_io::read_cloud(&path)
                     .with_context(|| format!("reading {}", path.display()))?;
                 let name = path
                     .file_stem()

@@ -157,7 +157,7 @@ impl SequenceSpec {
                 let seed = Some(self.acquisition.sampling_seed);
                 Some(self.scene.load(&self.base_dir, seed)?.0)
             }
-            Scene::Las { .. } => None,
+            Scene::File { .. } => None,
         };
         Ok((model, acquired))
     }

@@ -130,6 +130,11 @@ fn mutate_bytes(bytes: &[u8], seed: u64) -> Vec<u8> {
 }
 
 fn small_las(dir: &Path, name: &str) -> Vec<u8> {
+    small_cloud_file(dir, name)
+}
+
+/// A small cloud written in the format `name`'s extension names.
+fn small_cloud_file(dir: &Path, name: &str) -> Vec<u8> {
     let positions: Vec<DVec3> = (0..300)
         .map(|i| DVec3::new(f64::from(i) * 0.02, f64::from(i % 9) * 0.1, 1.0))
         .collect();
@@ -142,7 +147,7 @@ fn small_las(dir: &Path, name: &str) -> Vec<u8> {
     )
     .unwrap();
     let path = dir.join(name);
-    splat::write_las(&cloud, &path).unwrap();
+    cloud_io::write_cloud(&cloud, &path).unwrap();
     std::fs::read(&path).unwrap()
 }
 
@@ -157,7 +162,41 @@ proptest! {
         let valid = small_las(&dir, name);
         let path = dir.join(format!("m-{seed}-{name}"));
         std::fs::write(&path, mutate_bytes(&valid, seed)).unwrap();
-        let _ = splat::read_las(&path);
+        let _ = cloud_io::read_cloud(&path);
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    /// PLY and E57 through the same loader: byte mutations of files written by other
+    /// programs (binary and ASCII PLY, a structured and a coloured E57) and of our own
+    /// PLY and E57 output; PLY headers also mutated as text.
+    #[test]
+    fn ply_and_e57_files(seed in any::<u64>(), which in 0usize..7, text in any::<bool>()) {
+        let dir = temp("ply-e57");
+        let (name, valid) = match which {
+            0 => ("c.ply", small_cloud_file(&dir, "c.ply")),
+            1 => ("c.e57", small_cloud_file(&dir, "c.e57")),
+            k => {
+                let name = [
+                    "open3d_pcd_double_rgb.ply",
+                    "blender_ascii_rgb.ply",
+                    "happly_big_endian_mesh.ply",
+                    "tinyCartesianFloatRgb.e57",
+                    "read_error.e57",
+                ][k - 2];
+                (name, std::fs::read(root().join("fixtures/clouds").join(name)).unwrap())
+            }
+        };
+        let mutated = if text && name.ends_with(".ply") {
+            // The header as text (lines deleted, numbers replaced), the body as it was.
+            let end = valid.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+            let header = mutate_text(&String::from_utf8_lossy(&valid[..end]), seed);
+            [header.as_bytes(), &valid[end..]].concat()
+        } else {
+            mutate_bytes(&valid, seed)
+        };
+        let path = dir.join(format!("m-{seed}-{name}"));
+        std::fs::write(&path, mutated).unwrap();
+        let _ = cloud_io::read_cloud(&path);
         std::fs::remove_file(&path).unwrap();
     }
 

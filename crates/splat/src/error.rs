@@ -2,32 +2,10 @@
 
 use std::path::PathBuf;
 
-/// Everything that can go wrong when reading, building, writing or rendering a cloud.
+/// Everything that can go wrong when building or rendering a cloud.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SplatError {
-    /// A LAS/LAZ file could not be read or written (truncated, corrupt, unsupported).
-    #[error("LAS/LAZ file {path}: {source}")]
-    Las {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: Box<las::Error>,
-    },
-    /// A LAS/LAZ file that holds fewer points than its header announces.
-    #[error(
-        "LAS/LAZ file {path} is truncated or its header lies: {}the file holds {found}",
-        announced.map_or(String::new(), |n| format!("its header announces {n} points, "))
-    )]
-    Truncated {
-        /// The file.
-        path: PathBuf,
-        /// The header's point count, if the header could be read.
-        announced: Option<u64>,
-        /// What the file holds instead (for LAS, the points its bytes hold; for LAZ,
-        /// the points decompressed before its data ended).
-        found: String,
-    },
     /// A cloud with no point.
     #[error("the point cloud is empty")]
     EmptyCloud,

@@ -1,8 +1,7 @@
 //! Shared helpers.
 
-use std::path::PathBuf;
 use std::sync::OnceLock;
-pub use test_support::{data_dir, workspace_root as root};
+pub use test_support::workspace_root as root;
 
 use world::city::{City, CityParams};
 
@@ -15,11 +14,4 @@ pub fn fixture(name: &str) -> ucm::Camera {
 pub fn default_city() -> &'static City {
     static CITY: OnceLock<City> = OnceLock::new();
     CITY.get_or_init(|| City::generate(&CityParams::default()).unwrap())
-}
-
-/// A temporary folder unique to this process and name.
-pub fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("splat-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }

@@ -2,5 +2,4 @@
 
 mod cloud;
 mod common;
-mod las;
 mod render;

@@ -22,7 +22,9 @@ use ucm::Isometry3;
 use vvs::{CameraFile, LocalizeFiles, Localizer, Method, PriorBox};
 
 #[derive(Parser, Debug)]
-#[command(about = "Localise a picture in a LAS/LAZ cloud by PGM virtual visual servoing")]
+#[command(
+    about = "Localise a picture in a cloud (LAS, LAZ, PLY or E57) by PGM virtual visual servoing"
+)]
 struct Args {
     /// The picture (PNG or JPEG, grey or colour, 8 or 16 bits).
     #[arg(long)]
@@ -39,7 +41,7 @@ struct Args {
     /// The calibrated part of the picture: x,y,width,height (pixels).
     #[arg(long)]
     crop: Option<String>,
-    /// The cloud (LAS or LAZ).
+    /// The cloud: LAS, LAZ, PLY or E57 (told apart by content).
     #[arg(long)]
     cloud: PathBuf,
     /// Initial world_from_camera, tx,ty,tz,θwx,θwy,θwz (m, rad).

@@ -90,6 +90,9 @@ pub enum VvsError {
     /// Rendering failed.
     #[error(transparent)]
     Render(#[from] splat::SplatError),
+    /// A cloud file could not be read.
+    #[error(transparent)]
+    CloudFile(#[from] cloud_io::CloudIoError),
     /// A camera file could not be read or describes no valid camera.
     #[error(transparent)]
     Camera(#[from] ucm::UcmError),

@@ -3,7 +3,8 @@
 //! The paper's §4 aligns pictures of a real catadioptric camera with renderings of a
 //! Lidar cloud. This is that call: a picture (PNG or JPEG, 8 or 16 bits, colour becomes
 //! luminance), its camera (a camera TOML file, or a Mei calibration in the YAML of
-//! `omniunwarp` with the picture's size and an annulus), a LAS/LAZ cloud, an initial
+//! `omniunwarp` with the picture's size and an annulus), a cloud (LAS, LAZ, PLY or E57, told
+//! apart by content), an initial
 //! pose, and optionally the prior box of the global search ([`crate::global`]). The
 //! brightness of the picture and of the renderings is centred and normalised (§4), so
 //! that the exposure of the camera and the colours of the cloud need not agree.
@@ -60,7 +61,7 @@ pub struct LocalizeFiles {
     pub crop: Option<[u32; 4]>,
     /// The camera.
     pub camera: CameraFile,
-    /// The cloud (LAS or LAZ).
+    /// The cloud (LAS, LAZ, PLY or E57: the format is read from the file's content).
     pub cloud: PathBuf,
 }
 
@@ -193,7 +194,7 @@ impl Localizer {
         let started = Instant::now();
         let camera = load_camera(files)?;
         let picture = Image::load(&files.picture, &camera, files.crop)?;
-        let (cloud, _) = splat::read_las(&files.cloud)?;
+        let (cloud, _, _) = cloud_io::read_cloud(&files.cloud)?;
         let load_time_s = started.elapsed().as_secs_f64();
         let outcome = self.localize_with_progress(&cloud, &camera, &picture, initial, progress)?;
         Ok(Localized {

@@ -29,7 +29,7 @@ fn localizes_a_png_in_a_laz_cloud_from_metres_away() {
     };
     let city = City::generate(&params).unwrap();
     let cloud_path = dir.join("city.laz");
-    splat::write_las(&city.cloud, &cloud_path).unwrap();
+    cloud_io::write_cloud(&city.cloud, &cloud_path).unwrap();
     // The picture: another sampling of the same surfaces, degraded, 16 bits.
     let resampled = City::generate(&CityParams {
         sampling_seed: Some(Acquisition::default().sampling_seed),
@@ -64,6 +64,18 @@ fn localizes_a_png_in_a_laz_cloud_from_metres_away() {
     assert!(dt < 0.05 && dr.to_degrees() < 0.5, "{dt} m");
     assert_eq!(localized.cloud_points, city.cloud.len());
     assert_eq!(localized.valid_pixels, camera.valid_pixel_count());
+    // The same cloud converted to E57 (as a scanner's software exports it): the same
+    // points, the same localisation, bit for bit.
+    let e57 = LocalizeFiles {
+        cloud: dir.join("city.e57"),
+        ..files.clone()
+    };
+    cloud_io::convert(&cloud_path, &e57.cloud).unwrap();
+    let from_e57 = Localizer::default().localize_files(&e57, start).unwrap();
+    assert_eq!(
+        from_e57.outcome.world_from_camera,
+        localized.outcome.world_from_camera
+    );
 
     // The global search inside the paper's box, from its corner (6 m along the street).
     let corner = truth * Isometry3::from_pose_vector([6.0, 1.5, 0.5, 0.0, 0.0, 0.15]).unwrap();
@@ -99,7 +111,7 @@ fn localizes_a_png_in_a_laz_cloud_from_metres_away() {
         cloud: dir.join("none.laz"),
         ..files.clone()
     };
-    assert!(matches!(err(&no_cloud, start), VvsError::Render(_)));
+    assert!(matches!(err(&no_cloud, start), VvsError::CloudFile(_)));
     let nan = Isometry3::from_translation(DVec3::new(f64::NAN, 0.0, 0.0));
     assert!(matches!(err(&files, nan), VvsError::NonFinitePose));
     // A start that sees nothing of the city (1 km away) is an input to fix, not a
@@ -146,7 +158,7 @@ fn reads_a_mei_calibration_and_a_cropped_real_picture() {
     };
     let start = Isometry3::IDENTITY;
     match Localizer::default().localize_files(&files, start) {
-        Err(VvsError::Render(e)) => eprintln!("{e}"),
+        Err(VvsError::CloudFile(e)) => eprintln!("{e}"),
         other => panic!("expected the cloud's error, got {other:?}"),
     }
     let bad_annulus = LocalizeFiles {

@@ -95,9 +95,10 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Generate the synthetic city and write it as LAS (or LAZ by the extension).
+    /// Generate the synthetic city and write it as a cloud file (LAS, LAZ, PLY or E57
+    /// by the extension).
     City {
-        /// Output file (.las or .laz).
+        /// Output file (.las, .laz, .ply or .e57).
         #[arg(long)]
         out: PathBuf,
         /// Seed of the city.
@@ -110,7 +111,17 @@ enum Command {
         #[arg(long)]
         textures: Option<PathBuf>,
     },
-    /// Fuse RGB-D frames (colour, 16-bit depth, poses) into a coloured LAS/LAZ cloud
+    /// Convert a cloud file into another format (by the output's extension: .las,
+    /// .laz, .ply, .e57; the input's format is read from its content), keeping its
+    /// coordinates (`f64`; LAS on the source's grid or 0.1 mm) and its 8- or 16-bit
+    /// colours exactly.
+    Convert {
+        /// The cloud to read.
+        input: PathBuf,
+        /// The file to write.
+        output: PathBuf,
+    },
+    /// Fuse RGB-D frames (colour, 16-bit depth, poses) into a coloured cloud
     /// (dataset format: crates/rgbd/src/dataset.rs).
     Fuse {
         /// The dataset's description (TOML).
@@ -138,7 +149,7 @@ enum Command {
         /// Nearest and farthest depth kept, metres.
         #[arg(long, default_value = "0.2,6")]
         depth_range_m: String,
-        /// Output cloud (.las or .laz).
+        /// Output cloud (.las, .laz, .ply or .e57).
         #[arg(long)]
         out: PathBuf,
     },
@@ -181,7 +192,7 @@ enum Command {
         /// Camera TOML file.
         #[arg(long)]
         camera: PathBuf,
-        /// A LAS/LAZ cloud (else the synthetic city of --city-seed).
+        /// A cloud file: LAS, LAZ, PLY or E57 (else the synthetic city of --city-seed).
         #[arg(long)]
         cloud: Option<PathBuf>,
         /// Seed of the synthetic city, when no --cloud is given.
@@ -475,15 +486,27 @@ fn main() -> anyhow::Result<()> {
                 ..CityParams::default()
             };
             // Fail before the work: a wrong extension or a folder that does not exist.
-            splat::check_las_path(&out)?;
+            cloud_io::CloudFormat::of_output(&out)?;
             let city = City::generate(&params)?;
             println!(
                 "generated {} points in {:.2} s",
                 city.cloud.len(),
                 city.generation_time_s
             );
-            splat::write_las(&city.cloud, &out)?;
+            cloud_io::write_cloud(&city.cloud, &out)?;
             println!("wrote {}", out.display());
+        }
+        Command::Convert { input, output } => {
+            let started = Instant::now();
+            let info = cloud_io::convert(&input, &output)?;
+            println!(
+                "{} ({}, {} points) -> {} in {:.1} s",
+                input.display(),
+                info.format,
+                info.points,
+                output.display(),
+                started.elapsed().as_secs_f64()
+            );
         }
         Command::Fuse {
             dataset,
@@ -496,7 +519,7 @@ fn main() -> anyhow::Result<()> {
             depth_range_m,
             out,
         } => {
-            splat::check_las_path(&out)?;
+            cloud_io::CloudFormat::of_output(&out)?;
             let dataset = rgbd::RgbdDataset::load(&dataset, &data)?;
             let mut list = bench_conv::parse_frames(&frames).context("--frames")?;
             if let Some(exclude) = exclude {
@@ -530,7 +553,7 @@ fn main() -> anyhow::Result<()> {
                 report.voxels,
                 report.points
             );
-            splat::write_las(&cloud, &out)?;
+            cloud_io::write_cloud(&cloud, &out)?;
             println!("wrote {}", out.display());
         }
         Command::Real {
@@ -593,13 +616,13 @@ fn main() -> anyhow::Result<()> {
             let camera = ucm::Camera::load_toml(&camera)?;
             let cloud = match cloud {
                 Some(path) => {
-                    let (cloud, info) = splat::read_las(&path)
+                    let (cloud, info, source) = cloud_io::read_cloud(&path)
                         .with_context(|| format!("reading {}", path.display()))?;
                     println!(
-                        "{}: {} points, {:?}",
+                        "{}: {} {} points, {source:?}",
                         path.display(),
+                        info.format,
                         cloud.len(),
-                        info.intensity_source
                     );
                     cloud
                 }

@@ -1,8 +1,8 @@
-//! LAS/LAZ: every shared file against its header, colour scaling, round trips, errors.
+//! LAS/LAZ: every shared file against its header, colour depth, round trips, errors.
 
+use cloud_io::{CloudFormat, CloudIoError, ColorScale, IntensitySource, write_cloud};
 use glam::DVec3;
-use splat::las_io::{ColorScale, IntensitySource};
-use splat::{PointCloud, SplatError, read_las, write_las};
+use splat::{PointCloud, SplatError};
 
 use crate::common::*;
 
@@ -21,7 +21,8 @@ fn every_shared_cloud_reads_with_its_header_counts_and_colour_range() {
         if ext != "las" && ext != "laz" {
             continue;
         }
-        let (cloud, info) = read_las(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let (cloud, info, source) =
+            read_las(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         assert_eq!(
             cloud.len() as u64,
             info.header_point_count,
@@ -44,18 +45,12 @@ fn every_shared_cloud_reads_with_its_header_counts_and_colour_range() {
         match name.as_str() {
             "autzen_trim.las" | "autzen_trim_7.las" => {
                 assert_eq!(cloud.len(), 110_000);
-                assert_eq!(
-                    info.intensity_source,
-                    IntensitySource::Color(ColorScale::EightBit)
-                );
+                assert_eq!(source, IntensitySource::Color(ColorScale::EightBit));
                 assert!(info.max_color_value.unwrap() <= 255);
             }
             "sample_c.las" => {
                 assert_eq!(cloud.len(), 14_408);
-                assert_eq!(
-                    info.intensity_source,
-                    IntensitySource::Color(ColorScale::SixteenBit)
-                );
+                assert_eq!(source, IntensitySource::Color(ColorScale::SixteenBit));
                 assert!(info.max_color_value.unwrap() > 255);
             }
             "lone-star.laz" => {
@@ -103,14 +98,11 @@ fn las_and_laz_round_trip() {
     .unwrap();
     for name in ["c.las", "c.laz"] {
         let path = dir.join(name);
-        write_las(&cloud, &path).unwrap();
-        let (back, info) = read_las(&path).unwrap();
+        write_cloud(&cloud, &path).unwrap();
+        let (back, _, source) = read_las(&path).unwrap();
         assert_eq!(back.len(), cloud.len());
         // Written as 16-bit full range, read back as such.
-        assert_eq!(
-            info.intensity_source,
-            IntensitySource::Color(ColorScale::SixteenBit)
-        );
+        assert_eq!(source, IntensitySource::Color(ColorScale::SixteenBit));
         // Same set of points (the order follows the cells): compare sorted.
         let key = |c: &PointCloud| {
             let mut v: Vec<(i64, i64, i64, [u8; 3])> = (0..c.len())
@@ -144,11 +136,16 @@ fn corrupt_truncated_and_missing_files_are_errors() {
     let dir = temp_dir("corrupt");
     assert!(matches!(
         read_las(dir.join("missing.las")),
-        Err(SplatError::Io { .. })
+        Err(CloudIoError::Io { .. })
     ));
     let junk = dir.join("junk.las");
     std::fs::write(&junk, b"this is not a LAS file at all, just some bytes").unwrap();
-    assert!(matches!(read_las(&junk), Err(SplatError::Las { .. })));
+    assert!(matches!(
+        read_las(&junk),
+        Err(CloudIoError::UnknownFormat { .. })
+    ));
+    std::fs::write(&junk, b"LASF and then nothing that a header needs").unwrap();
+    assert!(matches!(read_las(&junk), Err(CloudIoError::Las { .. })));
 
     // A real file cut in the middle of its points.
     let positions: Vec<DVec3> = (0..5000)
@@ -159,7 +156,7 @@ fn corrupt_truncated_and_missing_files_are_errors() {
             .unwrap();
     for name in ["t.las", "t.laz"] {
         let path = dir.join(name);
-        write_las(&cloud, &path).unwrap();
+        write_cloud(&cloud, &path).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         std::fs::write(&path, &bytes[..bytes.len() * 2 / 3]).unwrap();
         let result = std::panic::catch_unwind(|| read_las(&path));
@@ -188,7 +185,7 @@ fn lying_headers_are_refused_or_ignored() {
     let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 500], None, Some(0.01))
         .unwrap();
     let path = dir.join("h.las");
-    write_las(&cloud, &path).unwrap();
+    write_cloud(&cloud, &path).unwrap();
     let bytes = std::fs::read(&path).unwrap();
     // LAS 1.2: the legacy point count at bytes 107..111, bounds at 179..227.
     for count in [u32::MAX, 100_000_000, 501] {
@@ -196,7 +193,7 @@ fn lying_headers_are_refused_or_ignored() {
         lying[107..111].copy_from_slice(&count.to_le_bytes());
         std::fs::write(&path, &lying).unwrap();
         match read_las(&path) {
-            Err(SplatError::Truncated {
+            Err(CloudIoError::Truncated {
                 announced, found, ..
             }) => {
                 assert_eq!(announced, Some(u64::from(count)));
@@ -215,7 +212,7 @@ fn lying_headers_are_refused_or_ignored() {
         lying[179 + 8 * k..187 + 8 * k].copy_from_slice(&v.to_le_bytes());
     }
     std::fs::write(&path, &lying).unwrap();
-    let (back, info) = read_las(&path).unwrap();
+    let (back, info, _) = read_las(&path).unwrap();
     assert_eq!(info.bounds.1.x, 1e300);
     assert_eq!(back.len(), 500);
     let (lo, hi) = back.bounds();
@@ -229,11 +226,14 @@ fn lying_headers_are_refused_or_ignored() {
             ..
         })
     ));
-    // Output paths: .las/.laz in an existing folder only.
-    assert!(splat::check_las_path(&dir.join("c.LAZ")).is_ok());
-    assert!(splat::check_las_path(&dir.join("c.txt")).is_err());
-    assert!(splat::check_las_path(&dir.join("missing/c.las")).is_err());
-    assert!(write_las(&cloud, dir.join("c.txt")).is_err());
+    // Output paths: a known extension in an existing folder only.
+    assert_eq!(
+        CloudFormat::of_output(&dir.join("c.LAZ")).unwrap(),
+        CloudFormat::Laz
+    );
+    assert!(CloudFormat::of_output(&dir.join("c.txt")).is_err());
+    assert!(CloudFormat::of_output(&dir.join("missing/c.las")).is_err());
+    assert!(write_cloud(&cloud, dir.join("c.txt")).is_err());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -249,7 +249,7 @@ fn laz_chunk_tables_that_lie_are_refused() {
     let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 500], None, Some(0.01))
         .unwrap();
     let path = dir.join("c.laz");
-    write_las(&cloud, &path).unwrap();
+    write_cloud(&cloud, &path).unwrap();
     let mut bytes = std::fs::read(&path).unwrap();
     // The chunk table's offset is the first 8 bytes of the point data (offset at 96).
     let data = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;

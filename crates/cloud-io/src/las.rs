@@ -1,49 +1,32 @@
-//! Reading and writing LAS/LAZ files (every point format, with or without colour).
+//! LAS and LAZ (every point format, with or without colour).
 //!
-//! * **Colour scaling is detected**: LAS stores 16-bit colour channels, but many files
+//! * **Colour depth is detected**: LAS stores 16-bit colour channels, but many files
 //!   put 8-bit values in them. If no channel of any point exceeds 255 the values are
-//!   taken as 8-bit; otherwise as 16-bit and scaled down (`v / 257`).
-//! * **Without colour**, a point's intensity is its LAS `intensity` attribute divided
-//!   by the largest intensity of the file; if every intensity is zero, every point gets
-//!   the constant [`CONSTANT_INTENSITY`].
-//! * The cloud's origin is the points' minimum corner (not the header's bounds, which
-//!   may lie), rounded down to the metre, so that `f32` positions keep millimetre
-//!   precision on georeferenced data.
-//! * Writing uses LAS 1.2 point format 2 (position and colour, 16-bit full range,
-//!   millimetre resolution); a `.laz` extension compresses. A cloud without colour
-//!   is written in grey levels of its intensity, so that it renders the same when
-//!   read back.
+//!   taken as 8-bit; otherwise as 16-bit.
+//! * **Without colour**, the points keep the LAS `intensity` attribute.
+//! * The header's bounds are reported, never used (they may lie): the cloud's origin
+//!   comes from the data.
+//! * Writing uses LAS 1.2, point format 2 (position, intensity and colour, 16-bit full
+//!   range: 8-bit colours are written `v · 257`); a `.laz` extension compresses. The
+//!   coordinates are stored on a grid ([`LasGrid`]): the one given, or 0.1 mm from the
+//!   points' minimum corner (1 mm, then 1 cm, when the extent does not fit 32 bits).
 
 use std::path::Path;
 
 use glam::DVec3;
 
-use crate::{PointCloud, SplatError};
+use crate::{CloudIoError, ColorScale, Colors, Points};
 
 /// Points read from a LAS/LAZ file at a time.
 const LAS_CHUNK_POINTS: u64 = 50_000;
 
-/// Intensity of every point of a cloud that has neither colour nor intensity.
-pub const CONSTANT_INTENSITY: f32 = 0.5;
-
-/// How a file's colours were interpreted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ColorScale {
-    /// 8-bit values stored in the 16-bit fields.
-    EightBit,
-    /// Full 16-bit range.
-    SixteenBit,
-}
-
-/// Where the intensities of a loaded cloud come from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum IntensitySource {
-    /// Luminance of the colours, interpreted with this scale.
-    Color(ColorScale),
-    /// The LAS intensity attribute, normalised by its maximum.
-    IntensityAttribute,
-    /// [`CONSTANT_INTENSITY`].
-    Constant,
+/// The grid LAS coordinates are stored on: `coordinate = offset + scale · integer`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LasGrid {
+    /// Scale factors along x, y, z, metres.
+    pub scale_m: DVec3,
+    /// Offsets, metres.
+    pub offset_m: DVec3,
 }
 
 /// What was found in a LAS/LAZ file.
@@ -59,12 +42,12 @@ pub struct LasInfo {
     pub bounds: (DVec3, DVec3),
     /// Largest colour channel value over all points, if the format has colour.
     pub max_color_value: Option<u16>,
-    /// How intensities were made.
-    pub intensity_source: IntensitySource,
+    /// The grid of the coordinates.
+    pub grid: LasGrid,
 }
 
-fn las_error(path: &Path) -> impl Fn(las::Error) -> SplatError + '_ {
-    move |source| SplatError::Las {
+fn las_error(path: &Path) -> impl Fn(las::Error) -> CloudIoError + '_ {
+    move |source| CloudIoError::Las {
         path: path.to_owned(),
         source: Box::new(source),
     }
@@ -72,9 +55,9 @@ fn las_error(path: &Path) -> impl Fn(las::Error) -> SplatError + '_ {
 
 /// Refuse a LAZ file whose `laszip` record describes no point item (the `laz` crate
 /// panics on one rather than report it): a corrupt file.
-fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), SplatError> {
+fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), CloudIoError> {
     use std::io::{Seek, SeekFrom};
-    let io_error = |source| SplatError::Io {
+    let io_error = |source| CloudIoError::Io {
         path: path.to_owned(),
         source,
     };
@@ -89,7 +72,7 @@ fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), SplatError
         if vlr.record_id == 22204 && user_id.trim_end_matches('\0') == "laszip encoded" {
             let items = laz::LazVlr::read_from(vlr.data.as_slice()).map(|v| v.items().len());
             if let Ok(0) | Err(_) = items {
-                return Err(SplatError::Las {
+                return Err(CloudIoError::Las {
                     path: path.to_owned(),
                     source: Box::new(las::Error::Io(std::io::Error::new(
                         std::io::ErrorKind::InvalidData,
@@ -107,9 +90,13 @@ fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), SplatError
 /// (the `laz` crate would allocate the table from that count: 25 GB for a corrupt
 /// 10 KB file, found by our fuzzing). Mirrors `laz`'s own reading of the table's
 /// offset: at the start of the point data, or in the file's last 8 bytes.
-fn check_laz_chunk_table(path: &Path, data_start: u64, file_bytes: u64) -> Result<(), SplatError> {
+fn check_laz_chunk_table(
+    path: &Path,
+    data_start: u64,
+    file_bytes: u64,
+) -> Result<(), CloudIoError> {
     use std::io::{Read, Seek, SeekFrom};
-    let io_error = |source| SplatError::Io {
+    let io_error = |source| CloudIoError::Io {
         path: path.to_owned(),
         source,
     };
@@ -135,7 +122,7 @@ fn check_laz_chunk_table(path: &Path, data_start: u64, file_bytes: u64) -> Resul
     }
     let chunks = u64::from(u32::from_le_bytes([head[4], head[5], head[6], head[7]]));
     if chunks > file_bytes {
-        return Err(SplatError::Truncated {
+        return Err(CloudIoError::Truncated {
             path: path.to_owned(),
             announced: None,
             found: format!("a chunk table of {chunks} chunks in {file_bytes} bytes (corrupt)"),
@@ -158,6 +145,7 @@ fn ends_early(error: &las::Error) -> bool {
 /// What [`decode_points`] read from a file, before it becomes a cloud.
 struct Decoded {
     header: las::Header,
+    grid: LasGrid,
     point_format: u8,
     version: (u8, u8),
     bounds: (DVec3, DVec3),
@@ -172,10 +160,10 @@ fn decode_points(
     path: &Path,
     raw: &las::raw::Header,
     file_bytes: u64,
-) -> Result<Decoded, SplatError> {
+) -> Result<Decoded, CloudIoError> {
     let mut reader = las::Reader::from_path(path).map_err(|e| {
         if ends_early(&e) {
-            SplatError::Truncated {
+            CloudIoError::Truncated {
                 path: path.to_owned(),
                 announced: None,
                 found: "too few bytes for its header, its point data or its chunk table".into(),
@@ -193,6 +181,11 @@ fn decode_points(
         DVec3::new(b.min.x, b.min.y, b.min.z),
         DVec3::new(b.max.x, b.max.y, b.max.z),
     );
+    let t = header.transforms();
+    let grid = LasGrid {
+        scale_m: DVec3::new(t.x.scale, t.y.scale, t.z.scale),
+        offset_m: DVec3::new(t.x.offset, t.y.offset, t.z.offset),
+    };
     let announced = header.number_of_points();
     // An uncompressed file cannot hold more points than its bytes after the header;
     // checked before anything is allocated. A LAZ file is read by chunks, so memory
@@ -201,7 +194,7 @@ fn decode_points(
         let record_bytes = u64::from(raw.point_data_record_length).max(1);
         let room = file_bytes.saturating_sub(u64::from(raw.offset_to_point_data));
         if announced > room / record_bytes {
-            return Err(SplatError::Truncated {
+            return Err(CloudIoError::Truncated {
                 path: path.to_owned(),
                 announced: Some(announced),
                 found: format!(
@@ -234,14 +227,14 @@ fn decode_points(
                 .zip(chunk.z())
                 .map(|((x, y), z)| DVec3::new(x, y, z)),
         );
-        match chunk.rgb() {
-            Some(rgb) if has_rgb => raw_rgb.extend(rgb.map(|(r, g, b)| [r, g, b])),
-            _ => raw_intensity.extend(chunk.intensity()),
+        if let Some(rgb) = chunk.rgb().filter(|_| has_rgb) {
+            raw_rgb.extend(rgb.map(|(r, g, b)| [r, g, b]));
         }
+        raw_intensity.extend(chunk.intensity());
         read += got;
     }
     if read < announced {
-        return Err(SplatError::Truncated {
+        return Err(CloudIoError::Truncated {
             path: path.to_owned(),
             announced: Some(announced),
             found: format!(
@@ -253,6 +246,7 @@ fn decode_points(
     }
     Ok(Decoded {
         header,
+        grid,
         point_format,
         version,
         bounds,
@@ -263,16 +257,9 @@ fn decode_points(
     })
 }
 
-/// Read a LAS or LAZ file into a cloud (point spacing estimated from the data).
-pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatError> {
-    let path = path.as_ref();
-    if !path.exists() {
-        return Err(SplatError::Io {
-            path: path.to_owned(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        });
-    }
-    let io_error = |source| SplatError::Io {
+/// Read a LAS or LAZ file's points.
+pub(crate) fn read(path: &Path) -> Result<(Points, LasInfo), CloudIoError> {
+    let io_error = |source| CloudIoError::Io {
         path: path.to_owned(),
         source,
     };
@@ -286,16 +273,13 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
     let offsets = [raw.x_offset, raw.y_offset, raw.z_offset];
     if !scales.iter().all(|s| s.is_finite() && *s != 0.0) || !offsets.iter().all(|o| o.is_finite())
     {
-        return Err(SplatError::Las {
-            path: path.to_owned(),
-            source: Box::new(las::Error::Io(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!(
-                    "the header's scale factors {scales:?} must be finite and non-zero, its \
-                     offsets {offsets:?} finite"
-                ),
-            ))),
-        });
+        return Err(invalid(
+            path,
+            format!(
+                "the header's scale factors {scales:?} must be finite and non-zero, its \
+                 offsets {offsets:?} finite"
+            ),
+        ));
     }
     if raw.point_data_record_format & 0x80 != 0 {
         check_laz_items(path, &raw)?;
@@ -303,169 +287,113 @@ pub fn read_las(path: impl AsRef<Path>) -> Result<(PointCloud, LasInfo), SplatEr
     }
     // The `laz` decoder asserts (panics) on some corrupt inputs instead of reporting
     // them (an empty item list, an arithmetic-coder symbol out of range: found by our
-    // fuzzing); the checks above catch the known ones with a clear message, and any
-    // other panic inside the decoder is caught here and reported as a corrupt file.
-    // Nothing decoded survives a caught panic. (A binary built with
-    // `panic = "abort"` loses this net.)
-    let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        decode_points(path, &raw, file_bytes)
-    }))
-    .map_err(|payload| {
-        let message = payload
-            .downcast_ref::<&str>()
-            .map(|s| (*s).to_owned())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "no message".to_owned());
-        SplatError::Las {
-            path: path.to_owned(),
-            source: Box::new(las::Error::Io(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!("the point decoder failed on corrupt data ({message})"),
-            ))),
-        }
-    })??;
-    if decoded.positions.is_empty() {
-        return Err(SplatError::EmptyCloud);
-    }
-    // The origin comes from the data (the header's bounds may lie): the minimum
-    // corner, rounded down to the metre.
-    let origin = decoded
-        .positions
-        .iter()
-        .fold(DVec3::splat(f64::INFINITY), |m, p| m.min(*p))
-        .floor();
-
-    let (intensities, colors, max_color_value, intensity_source) = match decoded.has_rgb {
-        true => {
-            let raw = decoded.raw_rgb;
-            let max = raw.iter().flatten().copied().max().unwrap_or(0);
-            let scale = if max <= 255 {
-                ColorScale::EightBit
-            } else {
-                ColorScale::SixteenBit
-            };
-            let colors: Vec<[u8; 3]> = raw
+    // fuzzing); the checks above catch the known ones with a clear message, and
+    // `read_points` reports any other panic inside the decoder as a corrupt file.
+    let decoded = decode_points(path, &raw, file_bytes)?;
+    let max_color_value = decoded
+        .has_rgb
+        .then(|| decoded.raw_rgb.iter().flatten().copied().max().unwrap_or(0));
+    let colors = max_color_value.map(|max| Colors {
+        values: decoded.raw_rgb,
+        scale: if max <= 255 {
+            ColorScale::EightBit
+        } else {
+            ColorScale::SixteenBit
+        },
+    });
+    let points = Points {
+        positions_m: decoded.positions,
+        colors,
+        intensities: Some(
+            decoded
+                .raw_intensity
                 .iter()
-                .map(|c| {
-                    c.map(|v| match scale {
-                        ColorScale::EightBit => v as u8,
-                        ColorScale::SixteenBit => ((u32::from(v) + 128) / 257) as u8,
-                    })
-                })
-                .collect();
-            let intensities = colors.iter().map(|&c| crate::luminance(c)).collect();
-            (
-                intensities,
-                Some(colors),
-                Some(max),
-                IntensitySource::Color(scale),
-            )
-        }
-        false => {
-            let raw = decoded.raw_intensity;
-            let max = raw.iter().copied().max().unwrap_or(0);
-            if max == 0 {
-                (
-                    vec![CONSTANT_INTENSITY; raw.len()],
-                    None,
-                    None,
-                    IntensitySource::Constant,
-                )
-            } else {
-                let inv = 1.0 / f32::from(max);
-                (
-                    raw.iter().map(|&i| f32::from(i) * inv).collect(),
-                    None,
-                    None,
-                    IntensitySource::IntensityAttribute,
-                )
-            }
-        }
+                .map(|&i| f32::from(i))
+                .collect(),
+        ),
     };
-    let cloud = PointCloud::from_points(origin, &decoded.positions, &intensities, colors, None)?;
     Ok((
-        cloud,
+        points,
         LasInfo {
             header_point_count: decoded.header.number_of_points(),
             point_format: decoded.point_format,
             version: decoded.version,
             bounds: decoded.bounds,
             max_color_value,
-            intensity_source,
+            grid: decoded.grid,
         },
     ))
 }
 
-/// Check that `path` can name a cloud to write: it ends in `.las` or `.laz` (any case),
-/// and its folder exists. [`write_las`] checks it; call it before long work too.
-pub fn check_las_path(path: &Path) -> Result<(), SplatError> {
-    let extension = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    if !matches!(extension.as_deref(), Some("las" | "laz")) {
-        return Err(SplatError::Parameter {
-            name: "path",
-            message: format!("{} must end in .las or .laz", path.display()),
-        });
+/// A corrupt or unsupported file's error.
+fn invalid(path: &Path, message: String) -> CloudIoError {
+    CloudIoError::Las {
+        path: path.to_owned(),
+        source: Box::new(las::Error::Io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            message,
+        ))),
     }
-    if let Some(folder) = path.parent().filter(|p| !p.as_os_str().is_empty())
-        && !folder.is_dir()
-    {
-        return Err(SplatError::Parameter {
-            name: "path",
-            message: format!(
-                "{}: the folder {} does not exist",
-                path.display(),
-                folder.display()
-            ),
-        });
-    }
-    Ok(())
 }
 
-/// Write a cloud as LAS (or LAZ, by the `.laz` extension): LAS 1.2, point format 2,
-/// millimetre resolution, 16-bit colour (grey levels of the intensity if the cloud has
-/// no colour).
-pub fn write_las(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), SplatError> {
-    let path = path.as_ref();
-    check_las_path(path)?;
+impl LasGrid {
+    /// The finest of 0.1 mm, 1 mm and 1 cm on which every point is a 32-bit step from
+    /// the points' minimum corner rounded down to the metre.
+    pub fn fitting(positions_m: &[DVec3]) -> Self {
+        let (lo, hi) = positions_m.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        let offset_m = if lo.is_finite() {
+            lo.floor()
+        } else {
+            DVec3::ZERO
+        };
+        let extent = (hi - offset_m).max_element();
+        let scale = [1e-4, 1e-3, 1e-2]
+            .into_iter()
+            .find(|s| extent / s < f64::from(i32::MAX) - 1.0)
+            .unwrap_or(1e-2);
+        Self {
+            scale_m: DVec3::splat(scale),
+            offset_m,
+        }
+    }
+}
+
+/// Write points as LAS (or LAZ, by the `.laz` extension) on `grid`: LAS 1.2, point
+/// format 2, 16-bit colour (8-bit colours as `v · 257`; grey levels of the normalised
+/// intensity when there is no colour, black when neither), intensity rounded to
+/// 16 bits (normalised by its maximum unless it is already within `[0, 65535]`).
+pub(crate) fn write(points: &Points, path: &Path, grid: LasGrid) -> Result<(), CloudIoError> {
     let err = las_error(path);
     let mut builder = las::Builder::from((1, 2));
     builder.point_format = las::point::Format::new(2).map_err(&err)?;
-    builder.generating_software = "pgm-omni-vvs splat".into();
-    let origin = cloud.origin();
+    builder.generating_software = "pgm-omni-vvs cloud-io".into();
+    let axis = |scale: f64, offset: f64| las::Transform { scale, offset };
     builder.transforms = las::Vector {
-        x: las::Transform {
-            scale: 0.001,
-            offset: origin.x,
-        },
-        y: las::Transform {
-            scale: 0.001,
-            offset: origin.y,
-        },
-        z: las::Transform {
-            scale: 0.001,
-            offset: origin.z,
-        },
+        x: axis(grid.scale_m.x, grid.offset_m.x),
+        y: axis(grid.scale_m.y, grid.offset_m.y),
+        z: axis(grid.scale_m.z, grid.offset_m.z),
     };
     let header = builder.into_header().map_err(&err)?;
+    let intensity_16 = crate::intensity_to_u16(points.intensities.as_deref());
     let mut writer = las::Writer::from_path(path, header).map_err(&err)?;
-    for (i, (p, intensity)) in cloud.decoded().enumerate() {
-        let rgb = match cloud.colors() {
-            Some(c) => c[i],
-            None => [(intensity * 255.0).round() as u8; 3],
+    for (i, p) in points.positions_m.iter().enumerate() {
+        let intensity = intensity_16.as_ref().map_or(0, |v| v[i]);
+        let rgb = match &points.colors {
+            Some(c) => match c.scale {
+                ColorScale::EightBit => c.values[i].map(|v| v.min(255) * 257),
+                ColorScale::SixteenBit => c.values[i],
+            },
+            None => [intensity; 3],
         };
-        let w = cloud.origin() + p;
         let point = las::Point {
-            x: w.x,
-            y: w.y,
-            z: w.z,
-            color: Some(las::Color::new(
-                u16::from(rgb[0]) * 257,
-                u16::from(rgb[1]) * 257,
-                u16::from(rgb[2]) * 257,
-            )),
+            x: p.x,
+            y: p.y,
+            z: p.z,
+            intensity,
+            color: Some(las::Color::new(rgb[0], rgb[1], rgb[2])),
             ..Default::default()
         };
         writer.write_point(point).map_err(&err)?;
