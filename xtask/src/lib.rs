@@ -54,7 +54,7 @@ commands:
                        (sequence-long.toml); --quick: their CI subsets (*-quick*.toml).
                        Results (frames.csv, summary.md, plots, overlays) in results/fig4*/
                        and results/long*/, checked for consistency.
-  reproduce-real [--quick] [--seven-scenes DIR] [--portable]
+  reproduce-real [--quick] [--seven-scenes DIR] [--tum DIR] [--portable]
                        real photographs localised and tracked in clouds fused from RGB-D
                        frames (fixtures/real/bench-*.toml): the house of
                        $PGM_DATA_DIR/rgbd/house (default ../shared/data), each picture left
@@ -65,7 +65,10 @@ commands:
                        global search, tracking, the queries resampled to a catadioptric
                        camera; and again with the structure-from-motion poses of
                        Brachmann et al. (ICCV 2021) when DIR holds
-                       sfm_redkitchen_train.txt. Results in results/real/<name>/ (summary.md, runs.csv,
+                       sfm_redkitchen_train.txt; with --tum DIR, TUM RGB-D freiburg1_rpy
+                       judged against motion capture (TUM's archive unpacked, with the
+                       association file of its associate.py as associations.txt).
+                       Results in results/real/<name>/ (summary.md, runs.csv,
                        tracking.csv, plots, pictures/). --quick: the house's CI subset.
 
   All build bench-conv in release mode for this machine's instruction set
@@ -129,7 +132,8 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
             reproduce::fig4(quick, build)
         }
         "reproduce-real" => {
-            let (mut quick, mut seven_scenes, mut build) = (false, None, Build::Native);
+            let (mut quick, mut seven_scenes, mut tum, mut build) =
+                (false, None, None, Build::Native);
             let mut flags = rest.iter();
             while let Some(flag) = flags.next() {
                 match flag.as_str() {
@@ -141,10 +145,16 @@ pub fn run(args: Vec<String>) -> anyhow::Result<()> {
                             .with_context(|| format!("--seven-scenes needs a folder\n\n{HELP}"))?;
                         seven_scenes = Some(PathBuf::from(dir));
                     }
+                    "--tum" => {
+                        let dir = flags
+                            .next()
+                            .with_context(|| format!("--tum needs a folder\n\n{HELP}"))?;
+                        tum = Some(PathBuf::from(dir));
+                    }
                     other => bail!("unknown flag `{other}`\n\n{HELP}"),
                 }
             }
-            reproduce::real(quick, seven_scenes.as_deref(), build)
+            reproduce::real(quick, seven_scenes.as_deref(), tum.as_deref(), build)
         }
         "help" | "--help" | "-h" => {
             print!("{HELP}");

@@ -224,6 +224,13 @@ pgt/sfm/7scenes/redkitchen_train.txt of the GitHub repository \
 tsattler/visloc_pseudo_gt_limitations: copy it into the 7-Scenes folder as \
 sfm_redkitchen_train.txt";
 
+/// How to get TUM RGB-D freiburg1_rpy for `reproduce-real --tum`.
+const TUM_HELP: &str = "TUM RGB-D freiburg1_rpy (Sturm et al., IROS 2012; CC BY 4.0) is \
+rgbd_dataset_freiburg1_rpy.tgz of the dataset's download page (cvg.cit.tum.de/data/\
+datasets/rgbd-dataset/download): unpack it, write associations.txt with TUM's \
+associate.py (`python associate.py rgb.txt depth.txt > associations.txt`, colour \
+first) and pass the folder";
+
 /// The shared data folder: `PGM_DATA_DIR`, else `../shared/data` beside the checkout.
 fn data_dir() -> std::path::PathBuf {
     std::env::var_os("PGM_DATA_DIR")
@@ -232,11 +239,12 @@ fn data_dir() -> std::path::PathBuf {
 }
 
 /// Run the real-data benchmarks: the house of the shared data (or its quick subset),
-/// and 7-Scenes redkitchen when its frames are given; then check that the localiser
+/// 7-Scenes redkitchen and TUM RGB-D freiburg1_rpy when their frames are given; then check that the localiser
 /// reached its pictures' photometric optimum.
 pub fn real(
     quick: bool,
     seven_scenes: Option<&std::path::Path>,
+    tum: Option<&std::path::Path>,
     build: Build,
 ) -> anyhow::Result<()> {
     let root = project_root();
@@ -275,6 +283,18 @@ pub fn real(
             }
         }
         None if !quick => eprintln!("7-Scenes skipped: {SEVEN_SCENES_HELP}."),
+        None => {}
+    }
+    match tum {
+        Some(dir) => {
+            ensure!(
+                dir.join("associations.txt").is_file() && dir.join("groundtruth.txt").is_file(),
+                "{} does not hold associations.txt and groundtruth.txt. {TUM_HELP}",
+                dir.display()
+            );
+            runs.push(("bench-tum-fr1-rpy.toml", dir.to_path_buf(), "tum-fr1-rpy"));
+        }
+        None if !quick => eprintln!("TUM RGB-D skipped: {TUM_HELP}."),
         None => {}
     }
     for (bench, data, out) in runs {

@@ -260,7 +260,7 @@ max_iterations = 80
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The real benchmark's tracking settings: the fixtures parse (7-Scenes tracks with
+/// The real benchmark's tracking settings: every benchmark file parses (7-Scenes tracks with
 /// both predictions), and bad frame steps or predictions are refused.
 #[test]
 fn real_benchmark_tracking_settings_are_checked() {
@@ -273,6 +273,17 @@ fn real_benchmark_tracking_settings_are_checked() {
     );
     let house = bench_conv::real::RealSpec::load(&real.join("bench-house.toml")).unwrap();
     assert!(house.tracking.is_none());
+    // Every benchmark file parses (7-Scenes, TUM RGB-D, the house).
+    let mut benches = 0;
+    for entry in std::fs::read_dir(&real).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if name.starts_with("bench-") && name.ends_with(".toml") {
+            bench_conv::real::RealSpec::load(&path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+            benches += 1;
+        }
+    }
+    assert!(benches >= 5, "{benches}");
     let dir = std::env::temp_dir().join(format!("bench-conv-real-spec-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::copy(real.join("redkitchen.toml"), dir.join("redkitchen.toml")).unwrap();

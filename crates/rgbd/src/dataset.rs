@@ -23,6 +23,27 @@
 //! # frames by `name = "seq-01/frame-{:06}.color.png"`, others are skipped; an
 //! # optional `scale` (metres per unit of the file, default 1) scales the
 //! # translations, for poses from structure from motion
+//! # kind = "timestamped": `timestamp tx ty tz qx qy qz qw` lines at their own rate
+//! # (TUM RGB-D's groundtruth.txt: motion capture at 100 Hz), interpolated at each
+//! # frame's colour timestamp (linearly, rotations by slerp) between the two poses
+//! # around it, at most `max_gap_s` apart (default 0.05); needs `associations`
+//! ```
+//!
+//! Frames named by timestamps (TUM RGB-D's layout) are listed by an association file
+//! instead of the `color` and `depth` patterns; the frame numbers are its lines
+//! (from 0, comments and empty lines skipped):
+//!
+//! ```toml
+//! frames = [0, 693]
+//! associations = "associations.txt"  # `t_color color/t.png t_depth depth/t.png` lines,
+//!                                    # as TUM's associate.py writes from rgb.txt, depth.txt
+//! depth_scale_m = 0.0002
+//! color_camera = "tum-freiburg1-color.toml"
+//!
+//! [poses]
+//! kind = "timestamped"
+//! path = "groundtruth.txt"
+//! of = "color"
 //! ```
 //!
 //! The pictures and pose files are relative to the data folder given to
@@ -53,8 +74,12 @@ pub enum PoseOf {
 #[serde(deny_unknown_fields)]
 struct DatasetFile {
     frames: [u64; 2],
-    color: String,
-    depth: String,
+    #[serde(default)]
+    color: Option<String>,
+    #[serde(default)]
+    depth: Option<String>,
+    #[serde(default)]
+    associations: Option<String>,
     depth_scale_m: f64,
     #[serde(default)]
     invalid_depth: Vec<u16>,
@@ -84,10 +109,156 @@ enum PosesFile {
         #[serde(default = "unit_scale")]
         scale: f64,
     },
+    Timestamped {
+        path: String,
+        of: PoseOf,
+        #[serde(default = "default_max_gap_s")]
+        max_gap_s: f64,
+    },
 }
 
 fn unit_scale() -> f64 {
     1.0
+}
+
+fn default_max_gap_s() -> f64 {
+    0.05
+}
+
+/// Where a dataset's pictures are.
+#[derive(Clone, Debug)]
+enum Pictures {
+    /// Named by the frame number (`frame_path`).
+    Patterns { color: String, depth: String },
+    /// Listed by an association file, one line per frame from the first.
+    Listed {
+        color: Vec<String>,
+        depth: Vec<String>,
+    },
+}
+
+/// The lines of an association file: colour timestamp and file, depth timestamp and
+/// file (TUM's associate.py).
+struct Associations {
+    color_time_s: Vec<f64>,
+    color: Vec<String>,
+    depth: Vec<String>,
+}
+
+fn read_associations(path: &Path) -> Result<Associations, RgbdError> {
+    let text = read_text(path)?;
+    let mut out = Associations {
+        color_time_s: Vec::new(),
+        color: Vec::new(),
+        depth: Vec::new(),
+    };
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("");
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if words.is_empty() {
+            continue;
+        }
+        let bad = |message: String| RgbdError::Pose {
+            path: path.to_owned(),
+            line: i + 1,
+            message,
+        };
+        let [t_color, color, t_depth, depth] = words[..] else {
+            return Err(bad(format!(
+                "{} words, expected `t_color color_file t_depth depth_file`",
+                words.len()
+            )));
+        };
+        let time = |w: &str| {
+            w.parse::<f64>()
+                .ok()
+                .filter(|t| t.is_finite())
+                .ok_or_else(|| bad(format!("`{w}` is not a timestamp")))
+        };
+        let t = time(t_color)?;
+        time(t_depth)?;
+        if out.color_time_s.last().is_some_and(|&last| t < last) {
+            return Err(bad("the colour timestamps go back in time".into()));
+        }
+        out.color_time_s.push(t);
+        out.color.push(color.to_owned());
+        out.depth.push(depth.to_owned());
+    }
+    Ok(out)
+}
+
+/// The poses of timestamped lines (`t tx ty tz qx qy qz qw`, `world_from_camera`)
+/// interpolated at `times_s` (linearly, rotations by slerp) between the two lines
+/// around each, at most `max_gap_s` apart.
+fn interpolate_poses(
+    path: &Path,
+    times_s: &[f64],
+    first: u64,
+    max_gap_s: f64,
+) -> Result<Vec<Isometry3>, RgbdError> {
+    let mut stamped: Vec<(f64, Isometry3)> = Vec::new();
+    for (line, n) in number_lines(path)? {
+        if n.len() != 8 {
+            return Err(RgbdError::Pose {
+                path: path.to_owned(),
+                line,
+                message: format!("{} numbers, expected `t tx ty tz qx qy qz qw`", n.len()),
+            });
+        }
+        let q = DQuat::from_xyzw(n[4], n[5], n[6], n[7]);
+        let t = DVec3::new(n[1], n[2], n[3]);
+        let norm = q.length();
+        if !(n[0].is_finite() && t.is_finite() && norm.is_finite() && (norm - 1.0).abs() < 0.05) {
+            return Err(RgbdError::Pose {
+                path: path.to_owned(),
+                line,
+                message: format!("not a timestamped pose (quaternion norm {norm})"),
+            });
+        }
+        if stamped.last().is_some_and(|(last, _)| n[0] <= *last) {
+            return Err(RgbdError::Pose {
+                path: path.to_owned(),
+                line,
+                message: "the timestamps do not increase".into(),
+            });
+        }
+        stamped.push((n[0], Isometry3::from_rotation_translation(q.normalize(), t)));
+    }
+    times_s
+        .iter()
+        .enumerate()
+        .map(|(k, &time)| {
+            let after = stamped.partition_point(|(t, _)| *t < time);
+            let missing = |available: String| RgbdError::MissingPose {
+                frame: first + k as u64,
+                path: path.to_owned(),
+                available,
+            };
+            if let Some((t, pose)) = stamped.get(after)
+                && *t == time
+            {
+                return Ok(*pose);
+            }
+            let (Some((t0, p0)), Some((t1, p1))) = (
+                after.checked_sub(1).and_then(|i| stamped.get(i)),
+                stamped.get(after),
+            ) else {
+                return Err(missing(format!(
+                    "no pose on both sides of its time {time:.6} s"
+                )));
+            };
+            if t1 - t0 > max_gap_s {
+                return Err(missing(format!(
+                    "the poses around its time {time:.6} s are {:.3} s apart (max_gap_s = {max_gap_s})",
+                    t1 - t0
+                )));
+            }
+            let a = (time - t0) / (t1 - t0);
+            let translation = p0.translation.lerp(p1.translation, a);
+            let rotation = p0.rotation.slerp(p1.rotation, a).normalize();
+            Ok(Isometry3::from_rotation_translation(rotation, translation))
+        })
+        .collect()
 }
 
 /// A described folder of RGB-D frames.
@@ -96,8 +267,7 @@ pub struct RgbdDataset {
     root: PathBuf,
     first: u64,
     last: u64,
-    color: String,
-    depth: String,
+    pictures: Pictures,
     depth_scale_m: f64,
     invalid_depth: Vec<u16>,
     sensor: Sensor,
@@ -387,9 +557,43 @@ impl RgbdDataset {
                 "frames = [{first}, {last}]: the last must follow the first, at most {MAX_FRAMES} frames"
             )));
         }
-        for pattern in [&file.color, &file.depth] {
-            frame_path(pattern, first).map_err(|e| bad(e.to_string()))?;
-        }
+        let count = (last - first + 1) as usize;
+        let (pictures, color_time_s) = match (&file.associations, &file.color, &file.depth) {
+            (Some(path), None, None) => {
+                let listed = read_associations(&root.join(path))?;
+                if listed.color.len() < count + first as usize {
+                    return Err(bad(format!(
+                        "frames = [{first}, {last}] but {path} lists {} frames",
+                        listed.color.len()
+                    )));
+                }
+                let range = first as usize..=last as usize;
+                (
+                    Pictures::Listed {
+                        color: listed.color[range.clone()].to_vec(),
+                        depth: listed.depth[range.clone()].to_vec(),
+                    },
+                    Some(listed.color_time_s[range].to_vec()),
+                )
+            }
+            (None, Some(color), Some(depth)) => {
+                for pattern in [color, depth] {
+                    frame_path(pattern, first).map_err(|e| bad(e.to_string()))?;
+                }
+                (
+                    Pictures::Patterns {
+                        color: color.clone(),
+                        depth: depth.clone(),
+                    },
+                    None,
+                )
+            }
+            _ => {
+                return Err(bad(
+                    "give either `color` and `depth` (patterns) or `associations`".into(),
+                ));
+            }
+        };
         if !(file.depth_scale_m > 0.0 && file.depth_scale_m.is_finite()) {
             return Err(bad(format!(
                 "depth_scale_m must be > 0, got {}",
@@ -412,7 +616,6 @@ impl RgbdDataset {
             depth_camera,
             color_from_depth,
         };
-        let count = (last - first + 1) as usize;
         let (poses, of) = match &file.poses {
             PosesFile::Matrix { path, of } => {
                 let poses = if path.contains('{') {
@@ -451,12 +654,34 @@ impl RgbdDataset {
                     *of,
                 )
             }
+            PosesFile::Timestamped {
+                path,
+                of,
+                max_gap_s,
+            } => {
+                let Some(times) = &color_time_s else {
+                    return Err(bad(
+                        "[poses] kind = \"timestamped\" needs the frames' timestamps: give `associations`"
+                            .into(),
+                    ));
+                };
+                if !(*max_gap_s > 0.0 && max_gap_s.is_finite()) {
+                    return Err(bad(format!(
+                        "[poses] max_gap_s must be > 0, got {max_gap_s}"
+                    )));
+                }
+                (
+                    interpolate_poses(&root.join(path), times, first, *max_gap_s)?,
+                    *of,
+                )
+            }
         };
         if poses.len() < count {
             let path = match &file.poses {
                 PosesFile::Matrix { path, .. }
                 | PosesFile::Lines { path, .. }
-                | PosesFile::Colmap { path, .. } => root.join(path),
+                | PosesFile::Colmap { path, .. }
+                | PosesFile::Timestamped { path, .. } => root.join(path),
             };
             return Err(RgbdError::MissingPose {
                 frame: first + poses.len() as u64,
@@ -476,8 +701,7 @@ impl RgbdDataset {
             root,
             first,
             last,
-            color: file.color,
-            depth: file.depth,
+            pictures,
             depth_scale_m: file.depth_scale_m,
             invalid_depth: file.invalid_depth,
             sensor,
@@ -523,14 +747,20 @@ impl RgbdDataset {
 
     /// The colour picture's file of a frame.
     pub fn color_path(&self, frame: u64) -> Result<PathBuf, RgbdError> {
-        self.index(frame)?;
-        Ok(self.root.join(frame_path(&self.color, frame)?))
+        let k = self.index(frame)?;
+        Ok(self.root.join(match &self.pictures {
+            Pictures::Patterns { color, .. } => frame_path(color, frame)?,
+            Pictures::Listed { color, .. } => color[k].clone(),
+        }))
     }
 
     /// The depth picture's file of a frame.
     pub fn depth_path(&self, frame: u64) -> Result<PathBuf, RgbdError> {
-        self.index(frame)?;
-        Ok(self.root.join(frame_path(&self.depth, frame)?))
+        let k = self.index(frame)?;
+        Ok(self.root.join(match &self.pictures {
+            Pictures::Patterns { depth, .. } => frame_path(depth, frame)?,
+            Pictures::Listed { depth, .. } => depth[k].clone(),
+        }))
     }
 
     /// Read a frame's depth and colour pictures, checked against the sensor's sizes.

@@ -1,4 +1,4 @@
-//! Dataset descriptions and their files: name patterns, both pose formats, a
+//! Dataset descriptions and their files: name patterns, every pose format, a
 //! non-orthonormal rotation, bad files, the same cloud as frames added by hand and
 //! whatever the thread count; the real house pictures.
 
@@ -215,6 +215,107 @@ fn both_pose_formats_give_the_poses_and_the_same_cloud_on_any_thread_count() {
     }
     for c in &clouds[1..] {
         assert!(same(c, &clouds[0]));
+    }
+}
+
+/// TUM RGB-D's layout: pictures named by timestamps, listed by an association file,
+/// and motion-capture poses at their own rate, interpolated at each colour timestamp.
+#[test]
+fn timestamped_poses_are_interpolated_at_the_frames_of_an_association_file() {
+    let dir = temp_dir("timestamped");
+    write_dataset(&dir, "", &[]);
+    let time = |k: usize| 1_305_031_229.5 + 0.1 * k as f64;
+    // Line 0 lists a frame the description leaves out; lines 1..=4 the frames 10..=13.
+    let mut associations = String::from("# timestamp rgb timestamp depth\n");
+    associations += &format!(
+        "{:.6} c10.png {:.6} d010.png\n",
+        time(0) - 0.1,
+        time(0) - 0.1
+    );
+    for k in 0..4 {
+        associations += &format!(
+            "{:.6} c{}.png {:.6} d{:03}.png\n",
+            time(k),
+            10 + k,
+            time(k) + 0.004,
+            10 + k
+        );
+    }
+    // Two poses 10 ms apart around each frame, 5 mm on either side of its pose along
+    // x: the frame's own pose halfway.
+    let mut groundtruth = String::from("# timestamp tx ty tz qx qy qz qw\n");
+    for (k, pose) in poses().iter().enumerate() {
+        for (dt, dx) in [(-0.005, -0.005), (0.005, 0.005)] {
+            let shifted = Isometry3::from_rotation_translation(
+                pose.rotation,
+                pose.translation + DVec3::new(dx, 0.0, 0.0),
+            );
+            groundtruth += &format!("{:.6} {}", time(k) + dt, tum_line(&shifted));
+        }
+    }
+    std::fs::write(dir.join("data/associations.txt"), &associations).unwrap();
+    std::fs::write(dir.join("data/groundtruth.txt"), &groundtruth).unwrap();
+    let description = dir.join("tum.toml");
+    let text = "frames = [1, 4]\nassociations = \"associations.txt\"\ndepth_scale_m = 0.001\n\
+                color_camera = \"camera.toml\"\n\n[poses]\nkind = \"timestamped\"\n\
+                path = \"groundtruth.txt\"\nof = \"color\"\n";
+    std::fs::write(&description, text).unwrap();
+    let dataset = RgbdDataset::load(&description, dir.join("data")).unwrap();
+    assert_eq!(dataset.frames(), [1, 4]);
+    for (k, pose) in poses().iter().enumerate() {
+        let frame = 1 + k as u64;
+        let got = dataset.world_from_color(frame).unwrap();
+        // Timestamps of 1.3e9 s hold 0.2 µs: the halfway point to 1e-5 of the 1 cm.
+        assert!((got.translation - pose.translation).length() < 1e-6, "{k}");
+        assert!(got.rotation.angle_between(pose.rotation) < 1e-9, "{k}");
+        assert_eq!(
+            dataset.color_path(frame).unwrap(),
+            dir.join(format!("data/c{}.png", 10 + k))
+        );
+        assert_eq!(
+            dataset.depth_path(frame).unwrap(),
+            dir.join(format!("data/d{:03}.png", 10 + k))
+        );
+        dataset.read(frame).unwrap();
+    }
+    // Poses farther apart than max_gap_s, a frame beyond the poses, timestamped poses
+    // without timestamps, more frames than listed, a line of three words.
+    for (bad, expected) in [
+        (
+            text.replace("of = \"color\"", "of = \"color\"\nmax_gap_s = 0.005"),
+            "apart",
+        ),
+        (
+            text.replace("frames = [1, 4]", "frames = [0, 4]"),
+            "both sides",
+        ),
+        (
+            text.replace(
+                "associations = \"associations.txt\"",
+                "color = \"c{}.png\"\ndepth = \"d{:03}.png\"",
+            )
+            .replace("frames = [1, 4]", "frames = [10, 13]"),
+            "needs the frames' timestamps",
+        ),
+        (
+            text.replace("frames = [1, 4]", "frames = [1, 5]"),
+            "lists 5 frames",
+        ),
+        (
+            text.replace(
+                "associations = \"associations.txt\"",
+                "associations = \"groundtruth.txt\"",
+            ),
+            "expected `t_color color_file t_depth depth_file`",
+        ),
+        (
+            text.replace("depth_scale_m", "color = \"c{}.png\"\ndepth_scale_m"),
+            "either `color` and `depth`",
+        ),
+    ] {
+        std::fs::write(&description, &bad).unwrap();
+        let error = RgbdDataset::load(&description, dir.join("data")).unwrap_err();
+        assert!(error.to_string().contains(expected), "{bad}: {error}");
     }
 }
 

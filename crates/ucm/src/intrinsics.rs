@@ -34,8 +34,10 @@ fn is_zero(value: &f64) -> bool {
 }
 
 /// Mei's radial–tangential distortion of the normalised plane:
-/// `x_d = x(1 + k1 r² + k2 r⁴) + 2 p1 x y + p2 (r² + 2x²)`,
-/// `y_d = y(1 + k1 r² + k2 r⁴) + p1 (r² + 2y²) + 2 p2 x y`.
+/// `x_d = x(1 + k1 r² + k2 r⁴ + k3 r⁶) + 2 p1 x y + p2 (r² + 2x²)`,
+/// `y_d = y(1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2y²) + 2 p2 x y`.
+/// Mei's model has no `k3` (0, left out of files when 0); the plumb-bob model of
+/// OpenCV's and ROS's pinhole calibrations (TUM RGB-D's Kinects) has it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Distortion {
@@ -47,6 +49,9 @@ pub struct Distortion {
     pub p1: f64,
     /// Second tangential coefficient.
     pub p2: f64,
+    /// Third radial coefficient (0 in Mei's model).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k3: f64,
 }
 
 impl Intrinsics {
@@ -84,6 +89,7 @@ impl Distortion {
             ("k2", self.k2),
             ("p1", self.p1),
             ("p2", self.p2),
+            ("k3", self.k3),
         ] {
             if !value.is_finite() {
                 return Err(UcmError::NonFinite { name, value });
@@ -94,7 +100,7 @@ impl Distortion {
 
     /// Whether every coefficient is zero.
     pub fn is_identity(&self) -> bool {
-        self.k1 == 0.0 && self.k2 == 0.0 && self.p1 == 0.0 && self.p2 == 0.0
+        self.k1 == 0.0 && self.k2 == 0.0 && self.k3 == 0.0 && self.p1 == 0.0 && self.p2 == 0.0
     }
 }
 
@@ -110,6 +116,7 @@ pub struct Params<T> {
     pub(crate) skew: T,
     pub(crate) k1: T,
     pub(crate) k2: T,
+    pub(crate) k3: T,
     pub(crate) p1: T,
     pub(crate) p2: T,
     pub(crate) distorted: bool,
@@ -117,9 +124,28 @@ pub struct Params<T> {
     pub(crate) fold_r2: T,
 }
 
-/// Smallest `s = r² > 0` where `d(r (1 + k1 r² + k2 r⁴))/dr = 1 + 3 k1 s + 5 k2 s²`
-/// vanishes: beyond it the radial distortion is not one-to-one.
-fn first_fold_r2(k1: f64, k2: f64) -> f64 {
+/// Smallest `s = r² > 0` where `d(r (1 + k1 r² + k2 r⁴ + k3 r⁶))/dr
+/// = 1 + 3 k1 s + 5 k2 s² + 7 k3 s³` vanishes: beyond it the radial distortion is not
+/// one-to-one. The roots of the quadratic when `k3 = 0`; otherwise the first sign change
+/// on a geometric grid of `s` (1e-6 to 1e6, 64 points an octave), bisected.
+fn first_fold_r2(k1: f64, k2: f64, k3: f64) -> f64 {
+    if k3 != 0.0 {
+        let slope = |s: f64| 1.0 + s * (3.0 * k1 + s * (5.0 * k2 + s * 7.0 * k3));
+        let step = 2f64.powf(1.0 / 64.0);
+        let (mut lo, mut hi) = (0.0, 1e-6);
+        while hi < 1e6 {
+            if slope(hi) <= 0.0 {
+                for _ in 0..100 {
+                    let mid = 0.5 * (lo + hi);
+                    if slope(mid) > 0.0 { lo = mid } else { hi = mid }
+                }
+                return lo;
+            }
+            lo = hi;
+            hi *= step;
+        }
+        return f64::INFINITY;
+    }
     let (a, b, c) = (5.0 * k2, 3.0 * k1, 1.0);
     let roots: [f64; 2] = if a == 0.0 {
         [if b < 0.0 { -c / b } else { f64::INFINITY }, f64::INFINITY]
@@ -150,10 +176,11 @@ impl<T: Real> Params<T> {
             skew: T::from_f64(intrinsics.skew),
             k1: T::from_f64(d.k1),
             k2: T::from_f64(d.k2),
+            k3: T::from_f64(d.k3),
             p1: T::from_f64(d.p1),
             p2: T::from_f64(d.p2),
             distorted: !d.is_identity(),
-            fold_r2: T::from_f64(first_fold_r2(d.k1, d.k2)),
+            fold_r2: T::from_f64(first_fold_r2(d.k1, d.k2, d.k3)),
         }
     }
 
@@ -180,7 +207,7 @@ impl<T: Real> Params<T> {
             return [x, y];
         }
         let r2 = x * x + y * y;
-        let radial = T::ONE + r2 * (self.k1 + self.k2 * r2);
+        let radial = T::ONE + r2 * (self.k1 + r2 * (self.k2 + self.k3 * r2));
         let two = T::TWO;
         [
             x * radial + two * self.p1 * x * y + self.p2 * (r2 + two * x * x),
@@ -197,8 +224,9 @@ impl<T: Real> Params<T> {
         let two = T::TWO;
         let six = T::from_f64(6.0);
         let r2 = x * x + y * y;
-        let radial = T::ONE + r2 * (self.k1 + self.k2 * r2);
-        let dradial = two * self.k1 + T::from_f64(4.0) * self.k2 * r2; // ∂radial/∂x = dradial·x
+        let radial = T::ONE + r2 * (self.k1 + r2 * (self.k2 + self.k3 * r2));
+        // ∂radial/∂x = dradial·x
+        let dradial = two * self.k1 + r2 * (T::from_f64(4.0) * self.k2 + six * self.k3 * r2);
         let cross = dradial * x * y + two * self.p1 * x + two * self.p2 * y;
         [
             [

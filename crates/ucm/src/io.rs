@@ -16,11 +16,12 @@
 //! xi = 0.9               # mirror parameter (>= 0; 0 = pinhole)
 //! # skew = 0.0           # optional, pixels: u = alpha_u x + skew y + u0
 //!
-//! # [distortion]         # optional, Mei's radial-tangential model
+//! # [distortion]         # optional, radial-tangential (Mei's, or plumb-bob with k3)
 //! # k1 = 0.0
 //! # k2 = 0.0
 //! # p1 = 0.0
 //! # p2 = 0.0
+//! # k3 = 0.0           # optional (OpenCV/ROS plumb-bob calibrations)
 //!
 //! [region]               # the valid part of the image
 //! kind = "annulus"       # "full", "annulus" or "mask"
@@ -236,6 +237,7 @@ impl Camera {
             k2: d[1],
             p1: d[2],
             p2: d[3],
+            k3: 0.0,
         };
         Camera::new(intrinsics, Some(distortion), width, height, region)
     }

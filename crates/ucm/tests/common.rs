@@ -14,7 +14,7 @@ pub fn camera_strategy(with_distortion: bool) -> impl Strategy<Value = Camera> {
         180.0..300.0f64,
         0.0..1.5f64,
         -1.0..1.0f64,
-        prop::array::uniform4(-0.05..0.05f64),
+        prop::array::uniform5(-0.05..0.05f64),
     )
         .prop_map(move |(au, av, u0, v0, xi, skew, d)| {
             let intrinsics = Intrinsics {
@@ -30,6 +30,7 @@ pub fn camera_strategy(with_distortion: bool) -> impl Strategy<Value = Camera> {
                 k2: d[1],
                 p1: d[2] * 0.1,
                 p2: d[3] * 0.1,
+                k3: d[4],
             });
             Camera::new(intrinsics, distortion, 640, 480, ValidRegion::Full).unwrap()
         })

@@ -154,6 +154,7 @@ fn toml_round_trip_with_distortion_skew_and_mask() {
             k2: 0.05,
             p1: 0.001,
             p2: -0.002,
+            k3: 0.01,
         }),
         320,
         240,

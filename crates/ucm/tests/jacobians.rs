@@ -113,7 +113,7 @@ proptest! {
     fn pixel_grid_matches_closed_form(xi in 0.0..1.2f64, inv_range in 0.01..2.0f32, k in 0usize..(80 * 60)) {
         let camera = Camera::new(
             Intrinsics { alpha_u: 30.0, alpha_v: 31.0, u0: 39.5, v0: 29.5, xi, skew: 0.2 },
-            Some(ucm::Distortion { k1: -0.02, k2: 0.01, p1: 0.001, p2: -0.002 }),
+            Some(ucm::Distortion { k1: -0.02, k2: 0.01, p1: 0.001, p2: -0.002, k3: 0.005 }),
             80, 60, ValidRegion::Full,
         ).unwrap();
         let grid = PixelGrid::new(&camera);

@@ -305,3 +305,51 @@ fn batch_projection_matches_single() {
     let mut short = vec![Err(OutOfView::OutsideImage); 3];
     assert!(camera.project_batch(&points, &mut short).is_err());
 }
+
+/// The plumb-bob calibration of TUM RGB-D's "freiburg1" Kinect (k3 = 1.16, large at the
+/// corners where k1 r² + k2 r⁴ + k3 r⁶ nearly cancel): every pixel of its 640×480
+/// picture is lifted and projected back to itself, and k3 moves the corners by pixels.
+#[test]
+fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
+    let intrinsics = Intrinsics {
+        alpha_u: 517.3,
+        alpha_v: 516.5,
+        u0: 318.6,
+        v0: 255.3,
+        xi: 0.0,
+        skew: 0.0,
+    };
+    let distortion = ucm::Distortion {
+        k1: 0.2624,
+        k2: -0.9531,
+        p1: -0.0054,
+        p2: 0.0026,
+        k3: 1.1633,
+    };
+    let camera = Camera::new(intrinsics, Some(distortion), 640, 480, ValidRegion::Full).unwrap();
+    let without_k3 = Camera::new(
+        intrinsics,
+        Some(ucm::Distortion {
+            k3: 0.0,
+            ..distortion
+        }),
+        640,
+        480,
+        ValidRegion::Full,
+    )
+    .unwrap();
+    for v in (0..480).step_by(7) {
+        for u in (0..640).step_by(7) {
+            let pixel = [f64::from(u), f64::from(v)];
+            let ray = camera.unproject(pixel).unwrap();
+            let back = camera.project(ray).unwrap();
+            assert!(
+                (back[0] - pixel[0]).abs() < 1e-6 && (back[1] - pixel[1]).abs() < 1e-6,
+                "{pixel:?} -> {back:?}"
+            );
+        }
+    }
+    let corner = camera.unproject([0.0, 0.0]).unwrap();
+    let moved: [f64; 2] = without_k3.project(corner).unwrap();
+    assert!(moved[0].hypot(moved[1]) > 5.0, "{moved:?}");
+}
