@@ -261,7 +261,9 @@ fn mei_calibration_loads_and_projects_inside_its_crop() {
                 .project(p)
                 .unwrap_or_else(|e| panic!("{k}° az {a}: {e:?}"));
             max_radius = max_radius.max((pixel[0] - i.u0).hypot(pixel[1] - i.v0));
-            let ray = camera.unproject(pixel).unwrap();
+            let ray = camera
+                .unproject(pixel)
+                .unwrap_or_else(|e| panic!("{pixel:?}: {e:?}"));
             assert!((ray[0] - p[0]).abs() + (ray[1] - p[1]).abs() + (ray[2] - p[2]).abs() < 1e-8);
         }
     }
@@ -308,7 +310,7 @@ fn batch_projection_matches_single() {
 
 /// The plumb-bob calibration of TUM RGB-D's "freiburg1" Kinect (k3 = 1.16, large at the
 /// corners where k1 r² + k2 r⁴ + k3 r⁶ nearly cancel): every pixel of its 640×480
-/// picture is lifted and projected back to itself, and k3 moves the corners by pixels.
+/// picture is lifted and projected back to itself; without k3 the corners fold.
 #[test]
 fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
     let intrinsics = Intrinsics {
@@ -341,7 +343,9 @@ fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
     for v in (0..480).step_by(7) {
         for u in (0..640).step_by(7) {
             let pixel = [f64::from(u), f64::from(v)];
-            let ray = camera.unproject(pixel).unwrap();
+            let ray = camera
+                .unproject(pixel)
+                .unwrap_or_else(|e| panic!("{pixel:?}: {e:?}"));
             let back = camera.project(ray).unwrap();
             assert!(
                 (back[0] - pixel[0]).abs() < 1e-6 && (back[1] - pixel[1]).abs() < 1e-6,
@@ -349,7 +353,17 @@ fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
             );
         }
     }
+    // Without k3 the corners' rays lie beyond the fold of k1 and k2 alone, and a pixel
+    // halfway to the corner moves by more than half a pixel.
     let corner = camera.unproject([0.0, 0.0]).unwrap();
-    let moved: [f64; 2] = without_k3.project(corner).unwrap();
-    assert!(moved[0].hypot(moved[1]) > 5.0, "{moved:?}");
+    assert_eq!(
+        without_k3.project(corner),
+        Err(ucm::OutOfView::DistortionFold)
+    );
+    let halfway = camera.unproject([160.0, 128.0]).unwrap();
+    let moved: [f64; 2] = without_k3.project(halfway).unwrap();
+    assert!(
+        (moved[0] - 160.0).hypot(moved[1] - 128.0) > 0.5,
+        "{moved:?}"
+    );
 }
