@@ -189,13 +189,14 @@ fn read_associations(path: &Path) -> Result<Associations, RgbdError> {
 
 /// The poses of timestamped lines (`t tx ty tz qx qy qz qw`, `world_from_camera`)
 /// interpolated at `times_s` (linearly, rotations by slerp) between the two lines
-/// around each, at most `max_gap_s` apart.
+/// around each, at most `max_gap_s` apart; a frame without one gets the reason (a
+/// motion-capture system loses the camera now and then: an error when the frame is
+/// used, not when the dataset is read).
 fn interpolate_poses(
     path: &Path,
     times_s: &[f64],
-    first: u64,
     max_gap_s: f64,
-) -> Result<Vec<Isometry3>, RgbdError> {
+) -> Result<Vec<Result<Isometry3, String>>, RgbdError> {
     let mut stamped: Vec<(f64, Isometry3)> = Vec::new();
     for (line, n) in number_lines(path)? {
         if n.len() != 8 {
@@ -224,16 +225,10 @@ fn interpolate_poses(
         }
         stamped.push((n[0], Isometry3::from_rotation_translation(q.normalize(), t)));
     }
-    times_s
+    Ok(times_s
         .iter()
-        .enumerate()
-        .map(|(k, &time)| {
+        .map(|&time| {
             let after = stamped.partition_point(|(t, _)| *t < time);
-            let missing = |available: String| RgbdError::MissingPose {
-                frame: first + k as u64,
-                path: path.to_owned(),
-                available,
-            };
             if let Some((t, pose)) = stamped.get(after)
                 && *t == time
             {
@@ -243,22 +238,20 @@ fn interpolate_poses(
                 after.checked_sub(1).and_then(|i| stamped.get(i)),
                 stamped.get(after),
             ) else {
-                return Err(missing(format!(
-                    "no pose on both sides of its time {time:.6} s"
-                )));
+                return Err(format!("no pose on both sides of its time {time:.6} s"));
             };
             if t1 - t0 > max_gap_s {
-                return Err(missing(format!(
+                return Err(format!(
                     "the poses around its time {time:.6} s are {:.3} s apart (max_gap_s = {max_gap_s})",
                     t1 - t0
-                )));
+                ));
             }
             let a = (time - t0) / (t1 - t0);
             let translation = p0.translation.lerp(p1.translation, a);
             let rotation = p0.rotation.slerp(p1.rotation, a).normalize();
             Ok(Isometry3::from_rotation_translation(rotation, translation))
         })
-        .collect()
+        .collect())
 }
 
 /// A described folder of RGB-D frames.
@@ -271,8 +264,10 @@ pub struct RgbdDataset {
     depth_scale_m: f64,
     invalid_depth: Vec<u16>,
     sensor: Sensor,
-    /// `world_from_depth` of every frame, `first..=last`.
-    world_from_depth: Vec<Isometry3>,
+    /// `world_from_depth` of every frame, `first..=last`, or why a frame has none.
+    world_from_depth: Vec<Result<Isometry3, String>>,
+    /// The pose file (in errors).
+    poses_path: PathBuf,
 }
 
 /// Most frames a dataset may list.
@@ -464,6 +459,11 @@ fn read_pose_lines(path: &Path) -> Result<Vec<Isometry3>, RgbdError> {
         .collect()
 }
 
+/// Poses every frame has.
+fn all_ok(poses: Vec<Isometry3>) -> Vec<Result<Isometry3, String>> {
+    poses.into_iter().map(Ok).collect()
+}
+
 /// Poses in COLMAP's layout (`NAME qw qx qy qz tx ty tz ...`, `camera_from_world`)
 /// of the frames `first..=last`, matched by `name` (a frame pattern); lines of other
 /// names are skipped; translations multiplied by `scale`. Returns `world_from_camera`,
@@ -636,9 +636,9 @@ impl RgbdDataset {
                 } else {
                     read_matrices(&root.join(path))?
                 };
-                (poses, *of)
+                (all_ok(poses), *of)
             }
-            PosesFile::Lines { path, of } => (read_pose_lines(&root.join(path))?, *of),
+            PosesFile::Lines { path, of } => (all_ok(read_pose_lines(&root.join(path))?), *of),
             PosesFile::Colmap {
                 path,
                 of,
@@ -650,7 +650,7 @@ impl RgbdDataset {
                     return Err(bad(format!("[poses] scale must be > 0, got {scale}")));
                 }
                 (
-                    read_colmap(&root.join(path), name, *scale, first, last)?,
+                    all_ok(read_colmap(&root.join(path), name, *scale, first, last)?),
                     *of,
                 )
             }
@@ -670,19 +670,16 @@ impl RgbdDataset {
                         "[poses] max_gap_s must be > 0, got {max_gap_s}"
                     )));
                 }
-                (
-                    interpolate_poses(&root.join(path), times, first, *max_gap_s)?,
-                    *of,
-                )
+                (interpolate_poses(&root.join(path), times, *max_gap_s)?, *of)
             }
         };
+        let path = match &file.poses {
+            PosesFile::Matrix { path, .. }
+            | PosesFile::Lines { path, .. }
+            | PosesFile::Colmap { path, .. }
+            | PosesFile::Timestamped { path, .. } => root.join(path),
+        };
         if poses.len() < count {
-            let path = match &file.poses {
-                PosesFile::Matrix { path, .. }
-                | PosesFile::Lines { path, .. }
-                | PosesFile::Colmap { path, .. }
-                | PosesFile::Timestamped { path, .. } => root.join(path),
-            };
             return Err(RgbdError::MissingPose {
                 frame: first + poses.len() as u64,
                 path,
@@ -692,9 +689,11 @@ impl RgbdDataset {
         let world_from_depth = poses
             .into_iter()
             .take(count)
-            .map(|p| match of {
-                PoseOf::Depth => p,
-                PoseOf::Color => sensor.world_from_depth(&p),
+            .map(|p| {
+                p.map(|p| match of {
+                    PoseOf::Depth => p,
+                    PoseOf::Color => sensor.world_from_depth(&p),
+                })
             })
             .collect();
         Ok(Self {
@@ -706,6 +705,7 @@ impl RgbdDataset {
             invalid_depth: file.invalid_depth,
             sensor,
             world_from_depth,
+            poses_path: path,
         })
     }
 
@@ -735,9 +735,22 @@ impl RgbdDataset {
         Ok((frame - self.first) as usize)
     }
 
-    /// `world_from_depth` of a frame.
+    /// `world_from_depth` of a frame (an error for a frame the poses leave out).
     pub fn world_from_depth(&self, frame: u64) -> Result<Isometry3, RgbdError> {
-        Ok(self.world_from_depth[self.index(frame)?])
+        self.world_from_depth[self.index(frame)?]
+            .clone()
+            .map_err(|reason| RgbdError::MissingPose {
+                frame,
+                path: self.poses_path.clone(),
+                available: reason,
+            })
+    }
+
+    /// Whether a frame has a pose (every frame has one but where timestamped poses
+    /// leave a gap).
+    pub fn has_pose(&self, frame: u64) -> bool {
+        self.index(frame)
+            .is_ok_and(|k| self.world_from_depth[k].is_ok())
     }
 
     /// `world_from_color` of a frame: where its colour picture was taken.

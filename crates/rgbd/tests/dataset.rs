@@ -278,17 +278,31 @@ fn timestamped_poses_are_interpolated_at_the_frames_of_an_association_file() {
         );
         dataset.read(frame).unwrap();
     }
-    // Poses farther apart than max_gap_s, a frame beyond the poses, timestamped poses
-    // without timestamps, more frames than listed, a line of three words.
-    for (bad, expected) in [
+    // A frame whose poses are farther apart than max_gap_s, or beyond the poses: an
+    // error when it is used (motion capture loses the camera now and then), not when
+    // the dataset is read.
+    for (gap, expected, frame) in [
         (
             text.replace("of = \"color\"", "of = \"color\"\nmax_gap_s = 0.005"),
             "apart",
+            2,
         ),
         (
             text.replace("frames = [1, 4]", "frames = [0, 4]"),
             "both sides",
+            0,
         ),
+    ] {
+        std::fs::write(&description, &gap).unwrap();
+        let dataset = RgbdDataset::load(&description, dir.join("data")).unwrap();
+        assert!(!dataset.has_pose(frame));
+        let error = dataset.world_from_color(frame).unwrap_err().to_string();
+        assert!(error.contains(expected), "{gap}: {error}");
+        assert!(dataset.fuse(&[frame], options(), |_, _| ()).is_err());
+    }
+    // Timestamped poses without timestamps, more frames than listed, a line of three
+    // words, patterns and associations together.
+    for (bad, expected) in [
         (
             text.replace(
                 "associations = \"associations.txt\"",
