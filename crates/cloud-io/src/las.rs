@@ -17,8 +17,13 @@ use glam::DVec3;
 
 use crate::{CloudIoError, ColorScale, Colors, Points};
 
-/// Points read from a LAS/LAZ file at a time.
+/// Points read from a LAS file at a time.
 const LAS_CHUNK_POINTS: u64 = 50_000;
+
+/// Most points read from a LAZ file at a time: about 20 of its compressed chunks
+/// (50 000 points each, as LASzip writes them), decompressed in parallel on rayon's
+/// threads (`las`'s `laz-parallel`).
+const LAZ_CHUNK_POINTS: u64 = 1 << 20;
 
 /// The grid LAS coordinates are stored on: `coordinate = offset + scale · integer`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -209,9 +214,16 @@ fn decode_points(
     let mut raw_intensity: Vec<u16> = Vec::new();
     let has_rgb = format.has_color;
     let mut chunk = las::PointDataBuilder::new().for_header(&header).build();
+    // A LAZ file's requests grow with its size (a compressed point takes a byte or
+    // more), so that a small file that lies about its count allocates little.
+    let chunk_points = if format.is_compressed {
+        file_bytes.clamp(LAS_CHUNK_POINTS, LAZ_CHUNK_POINTS)
+    } else {
+        LAS_CHUNK_POINTS
+    };
     let mut read = 0u64;
     while read < announced {
-        let want = (announced - read).min(LAS_CHUNK_POINTS);
+        let want = (announced - read).min(chunk_points);
         let got = match reader.fill_points(want, &mut chunk) {
             Ok(n) => n,
             Err(e) if ends_early(&e) => 0,
@@ -238,9 +250,9 @@ fn decode_points(
             path: path.to_owned(),
             announced: Some(announced),
             found: format!(
-                "{read} points before its data ends (read by chunks of {LAS_CHUNK_POINTS}: up to \
+                "{read} points before its data ends (read by chunks of {chunk_points}: up to \
                  {} more in the last one)",
-                LAS_CHUNK_POINTS - 1
+                chunk_points - 1
             ),
         });
     }

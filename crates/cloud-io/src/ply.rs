@@ -624,23 +624,31 @@ pub(crate) fn read(path: &Path) -> Result<(Points, PlyInfo), CloudIoError> {
     Ok((sink.finish(), info))
 }
 
-fn skip_ascii<R: BufRead>(
-    path: &Path,
-    tokens: &mut Tokens<R>,
-    element: &Element,
-) -> Result<(), CloudIoError> {
-    let ended = || CloudIoError::Truncated {
+/// The error of a file that ends inside the records of an element before the vertices.
+fn element_ended(path: &Path, element: &Element) -> CloudIoError {
+    CloudIoError::Truncated {
         path: path.to_owned(),
         announced: None,
         found: format!(
             "fewer than the {} `{}` records before its vertices",
             element.count, element.name
         ),
-    };
+    }
+}
+
+fn skip_ascii<R: BufRead>(
+    path: &Path,
+    tokens: &mut Tokens<R>,
+    element: &Element,
+) -> Result<(), CloudIoError> {
+    let ended = || element_ended(path, element);
     let io_error = |source| CloudIoError::Io {
         path: path.to_owned(),
         source,
     };
+    if element.properties.is_empty() {
+        return Ok(()); // records of nothing, however many
+    }
     for _ in 0..element.count {
         for p in &element.properties {
             let items = match p {
@@ -668,14 +676,7 @@ fn skip_binary(
     big: bool,
     room: u64,
 ) -> Result<u64, CloudIoError> {
-    let ended = || CloudIoError::Truncated {
-        path: path.to_owned(),
-        announced: None,
-        found: format!(
-            "fewer than the {} `{}` records before its vertices",
-            element.count, element.name
-        ),
-    };
+    let ended = || element_ended(path, element);
     let skip = |reader: &mut dyn Read, bytes: u64, done: &mut u64| {
         if *done + bytes > room {
             return Err(ended());

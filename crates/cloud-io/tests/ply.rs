@@ -356,6 +356,26 @@ fn files_that_lie_or_break_the_format_are_errors() {
     std::fs::write(&path, &endless).unwrap();
     let message = read_points(&path).unwrap_err().to_string();
     assert!(message.contains("no `end_header`"), "{message}");
+    // An element of no property announcing 2⁶⁴ − 1 records before the vertices: skipped
+    // at once, in both encodings.
+    for format in ["ascii", "binary_little_endian"] {
+        let mut bytes = format!(
+            "ply\nformat {format} 1.0\nelement nothing 18446744073709551615\n\
+             element vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+             end_header\n"
+        )
+        .into_bytes();
+        if format == "ascii" {
+            bytes.extend_from_slice(b"1 2 3\n");
+        } else {
+            for v in [1f32, 2.0, 3.0] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        std::fs::write(&path, &bytes).unwrap();
+        let (points, _) = read_points(&path).unwrap();
+        assert_eq!(points.positions_m, [DVec3::new(1.0, 2.0, 3.0)], "{format}");
+    }
     // A vertex count of zero: no point.
     std::fs::write(
         &path,

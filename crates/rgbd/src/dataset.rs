@@ -24,9 +24,10 @@
 //! # optional `scale` (metres per unit of the file, default 1) scales the
 //! # translations, for poses from structure from motion
 //! # kind = "timestamped": `timestamp tx ty tz qx qy qz qw` lines at their own rate
-//! # (TUM RGB-D's groundtruth.txt: motion capture at 100 Hz), interpolated at each
-//! # frame's colour timestamp (linearly, rotations by slerp) between the two poses
-//! # around it, at most `max_gap_s` apart (default 0.05); needs `associations`
+//! # (TUM RGB-D's groundtruth.txt: motion capture at 100 Hz), interpolated
+//! # (linearly, rotations by slerp) between the two poses around each frame's colour
+//! # timestamp for its colour camera and around its depth timestamp for its depth
+//! # camera, at most `max_gap_s` apart (default 0.05); needs `associations`
 //! ```
 //!
 //! Frames named by timestamps (TUM RGB-D's layout) are listed by an association file
@@ -141,6 +142,7 @@ enum Pictures {
 /// file (TUM's associate.py).
 struct Associations {
     color_time_s: Vec<f64>,
+    depth_time_s: Vec<f64>,
     color: Vec<String>,
     depth: Vec<String>,
 }
@@ -149,6 +151,7 @@ fn read_associations(path: &Path) -> Result<Associations, RgbdError> {
     let text = read_text(path)?;
     let mut out = Associations {
         color_time_s: Vec::new(),
+        depth_time_s: Vec::new(),
         color: Vec::new(),
         depth: Vec::new(),
     };
@@ -176,11 +179,12 @@ fn read_associations(path: &Path) -> Result<Associations, RgbdError> {
                 .ok_or_else(|| bad(format!("`{w}` is not a timestamp")))
         };
         let t = time(t_color)?;
-        time(t_depth)?;
+        let t_depth = time(t_depth)?;
         if out.color_time_s.last().is_some_and(|&last| t < last) {
             return Err(bad("the colour timestamps go back in time".into()));
         }
         out.color_time_s.push(t);
+        out.depth_time_s.push(t_depth);
         out.color.push(color.to_owned());
         out.depth.push(depth.to_owned());
     }
@@ -266,6 +270,9 @@ pub struct RgbdDataset {
     sensor: Sensor,
     /// `world_from_depth` of every frame, `first..=last`, or why a frame has none.
     world_from_depth: Vec<Result<Isometry3, String>>,
+    /// `world_from_color` of every frame when the colour pictures were not taken with
+    /// the depth pictures (timestamped poses), else `None`: through the sensor.
+    world_from_color: Option<Vec<Result<Isometry3, String>>>,
     /// The pose file (in errors).
     poses_path: PathBuf,
 }
@@ -558,7 +565,7 @@ impl RgbdDataset {
             )));
         }
         let count = (last - first + 1) as usize;
-        let (pictures, color_time_s) = match (&file.associations, &file.color, &file.depth) {
+        let (pictures, times_s) = match (&file.associations, &file.color, &file.depth) {
             (Some(path), None, None) => {
                 let listed = read_associations(&root.join(path))?;
                 if listed.color.len() < count + first as usize {
@@ -573,7 +580,10 @@ impl RgbdDataset {
                         color: listed.color[range.clone()].to_vec(),
                         depth: listed.depth[range.clone()].to_vec(),
                     },
-                    Some(listed.color_time_s[range].to_vec()),
+                    Some((
+                        listed.color_time_s[range.clone()].to_vec(),
+                        listed.depth_time_s[range].to_vec(),
+                    )),
                 )
             }
             (None, Some(color), Some(depth)) => {
@@ -616,6 +626,7 @@ impl RgbdDataset {
             depth_camera,
             color_from_depth,
         };
+        let mut world_from_color = None;
         let (poses, of) = match &file.poses {
             PosesFile::Matrix { path, of } => {
                 let poses = if path.contains('{') {
@@ -659,7 +670,7 @@ impl RgbdDataset {
                 of,
                 max_gap_s,
             } => {
-                let Some(times) = &color_time_s else {
+                let Some((color_times, depth_times)) = &times_s else {
                     return Err(bad(
                         "[poses] kind = \"timestamped\" needs the frames' timestamps: give `associations`"
                             .into(),
@@ -670,7 +681,21 @@ impl RgbdDataset {
                         "[poses] max_gap_s must be > 0, got {max_gap_s}"
                     )));
                 }
-                (interpolate_poses(&root.join(path), times, *max_gap_s)?, *of)
+                // The depth camera's poses at the depth pictures' times, the colour
+                // camera's at the colour pictures'.
+                let at_depth = interpolate_poses(&root.join(path), depth_times, *max_gap_s)?;
+                let at_color = interpolate_poses(&root.join(path), color_times, *max_gap_s)?;
+                let color_camera_poses = at_color
+                    .into_iter()
+                    .map(|p| {
+                        p.map(|p| match of {
+                            PoseOf::Color => p,
+                            PoseOf::Depth => sensor.world_from_color(&p),
+                        })
+                    })
+                    .collect();
+                world_from_color = Some(color_camera_poses);
+                (at_depth, *of)
             }
         };
         let path = match &file.poses {
@@ -705,6 +730,7 @@ impl RgbdDataset {
             invalid_depth: file.invalid_depth,
             sensor,
             world_from_depth,
+            world_from_color,
             poses_path: path,
         })
     }
@@ -746,16 +772,27 @@ impl RgbdDataset {
             })
     }
 
-    /// Whether a frame has a pose (every frame has one but where timestamped poses
+    /// Whether a frame has its poses (every frame has them but where timestamped poses
     /// leave a gap).
     pub fn has_pose(&self, frame: u64) -> bool {
-        self.index(frame)
-            .is_ok_and(|k| self.world_from_depth[k].is_ok())
+        self.world_from_depth(frame).is_ok() && self.world_from_color(frame).is_ok()
     }
 
-    /// `world_from_color` of a frame: where its colour picture was taken.
+    /// `world_from_color` of a frame: where its colour picture was taken (with
+    /// timestamped poses, at the colour picture's own time).
     pub fn world_from_color(&self, frame: u64) -> Result<Isometry3, RgbdError> {
-        Ok(self.sensor.world_from_color(&self.world_from_depth(frame)?))
+        match &self.world_from_color {
+            None => Ok(self.sensor.world_from_color(&self.world_from_depth(frame)?)),
+            Some(poses) => {
+                poses[self.index(frame)?]
+                    .clone()
+                    .map_err(|reason| RgbdError::MissingPose {
+                        frame,
+                        path: self.poses_path.clone(),
+                        available: reason,
+                    })
+            }
+        }
     }
 
     /// The colour picture's file of a frame.
@@ -825,7 +862,16 @@ impl RgbdDataset {
                 chunk.par_iter().map(|&k| self.read(k)).collect();
             for (&k, read) in chunk.iter().zip(pictures) {
                 let (depth, color) = read?;
-                let stats = fusion.add(&depth, &color, &self.world_from_depth(k)?)?;
+                let world_from_depth = self.world_from_depth(k)?;
+                let stats = match &self.world_from_color {
+                    None => fusion.add(&depth, &color, &world_from_depth)?,
+                    Some(_) => fusion.add_at(
+                        &depth,
+                        &color,
+                        &world_from_depth,
+                        &self.world_from_color(k)?,
+                    )?,
+                };
                 report.add(stats);
                 done += 1;
                 progress(done, frames.len());

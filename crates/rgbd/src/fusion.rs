@@ -263,12 +263,40 @@ impl Fusion {
     }
 
     /// Add a frame: its depth and colour pictures (of the sensor's cameras' sizes) and
-    /// where its depth camera was (`world_from_depth`).
+    /// where its depth camera was (`world_from_depth`); the colour camera is where the
+    /// sensor's `color_from_depth` puts it.
     pub fn add(
         &mut self,
         depth: &DepthImage,
         color: &ColorImage,
         world_from_depth: &Isometry3,
+    ) -> Result<FrameStats, RgbdError> {
+        let color_from_depth = self.sensor.color_from_depth;
+        self.add_seen_from(depth, color, world_from_depth, color_from_depth)
+    }
+
+    /// As [`Fusion::add`], with the colour picture taken from `world_from_color`
+    /// rather than through the sensor's `color_from_depth`: a moving camera whose depth
+    /// and colour pictures are not simultaneous (TUM RGB-D's are up to 20 ms apart, a
+    /// degree and more at its speeds). The depth camera's rays stay the sensor's.
+    pub fn add_at(
+        &mut self,
+        depth: &DepthImage,
+        color: &ColorImage,
+        world_from_depth: &Isometry3,
+        world_from_color: &Isometry3,
+    ) -> Result<FrameStats, RgbdError> {
+        check_pose("world_from_color", world_from_color)?;
+        let color_from_depth = world_from_color.inverse() * *world_from_depth;
+        self.add_seen_from(depth, color, world_from_depth, color_from_depth)
+    }
+
+    fn add_seen_from(
+        &mut self,
+        depth: &DepthImage,
+        color: &ColorImage,
+        world_from_depth: &Isometry3,
+        color_from_depth: Isometry3,
     ) -> Result<FrameStats, RgbdError> {
         check_size(
             "depth picture",
@@ -288,7 +316,6 @@ impl Fusion {
         let [near, far] = self.options.depth_range_m;
         let jump = self.options.flying_pixel_jump;
         let color_camera = &self.sensor.color_camera;
-        let color_from_depth = self.sensor.color_from_depth;
         let registered = color_from_depth == Isometry3::IDENTITY
             && self.sensor.depth_camera == self.sensor.color_camera;
         let (rotation, translation) = color_from_depth.to_f32();

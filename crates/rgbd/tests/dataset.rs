@@ -268,6 +268,10 @@ fn timestamped_poses_are_interpolated_at_the_frames_of_an_association_file() {
         // Timestamps of 1.3e9 s hold 0.2 µs: the halfway point to 1e-5 of the 1 cm.
         assert!((got.translation - pose.translation).length() < 1e-6, "{k}");
         assert!(got.rotation.angle_between(pose.rotation) < 1e-9, "{k}");
+        // The depth picture 4 ms later: its camera's pose 4 mm along x.
+        let depth_at = dataset.world_from_depth(frame).unwrap();
+        let moved = pose.translation + DVec3::new(0.004, 0.0, 0.0);
+        assert!((depth_at.translation - moved).length() < 1e-6, "{k}");
         assert_eq!(
             dataset.color_path(frame).unwrap(),
             dir.join(format!("data/c{}.png", 10 + k))

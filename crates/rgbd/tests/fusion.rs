@@ -52,6 +52,47 @@ fn a_wall_seen_twice_becomes_points_on_the_wall_with_its_colours() {
     assert!(worst < 6.0, "colour off by {worst}");
 }
 
+/// A colour picture taken from elsewhere than the depth picture (a moving camera whose
+/// pictures are not simultaneous): `add_at` colours the points from where the colour
+/// picture was taken, `add` (the sensor's fixed transform) from the wrong place.
+#[test]
+fn a_colour_picture_taken_elsewhere_colours_the_points_from_its_own_pose() {
+    let camera = pinhole(60.0);
+    let options = FuseOptions {
+        voxel_size_m: 0.05,
+        min_frames: 1,
+        ..FuseOptions::default()
+    };
+    let world_from_depth = at(0.0, 0.0);
+    let world_from_color =
+        at(0.12, -0.05) * Isometry3::from_pose_vector([0.0, 0.0, 0.0, 0.0, 0.03, 0.0]).unwrap();
+    let depth = WALL.depth(&camera, &world_from_depth);
+    let color = WALL.color(&camera, &world_from_color);
+    let worst = |at_its_pose: bool| {
+        let mut fusion = Fusion::new(Sensor::registered(camera.clone()), options).unwrap();
+        let stats = if at_its_pose {
+            fusion.add_at(&depth, &color, &world_from_depth, &world_from_color)
+        } else {
+            fusion.add(&depth, &color, &world_from_depth)
+        }
+        .unwrap();
+        assert!(stats.fused > 2000, "{stats:?}");
+        let cloud = fusion.cloud().unwrap();
+        let colors = cloud.colors().unwrap();
+        let mut worst = 0.0f64;
+        for (i, (p, _)) in cloud.decoded().enumerate() {
+            let expected = texture(cloud.origin() + p);
+            for c in 0..3 {
+                worst = worst.max((f64::from(colors[i][c]) - expected[c]).abs());
+            }
+        }
+        worst
+    };
+    let (right, wrong) = (worst(true), worst(false));
+    assert!(right < 6.0, "colour off by {right}");
+    assert!(wrong > 4.0 * right, "{wrong} vs {right}");
+}
+
 #[test]
 fn voxels_seen_by_too_few_frames_are_dropped() {
     let camera = pinhole(60.0);

@@ -203,7 +203,12 @@ impl PointCloud {
                 (x, y, z, rng.next_u64(), i as u32)
             })
             .collect();
-        order.sort_unstable();
+        // Every key holds the point's index, so any sort gives the same order: sorted
+        // on rayon's threads.
+        {
+            use rayon::slice::ParallelSliceMut;
+            order.par_sort_unstable();
+        }
 
         let cell_m = f64::from(cell_size_m);
         let step_m = cell_m / STEPS;

@@ -864,6 +864,11 @@ impl Benchmark {
                         lost,
                     });
                     progress.inc(1, "");
+                    if tracker.is_lost() {
+                        // Its alignment diverged: the tracker takes no more frames.
+                        progress.inc(((frames.len() - k - 1) / step) as u64, "");
+                        break;
+                    }
                 }
                 Ok(records)
             })
