@@ -40,29 +40,35 @@ fn e57_error(path: &Path) -> impl Fn(e57::Error) -> CloudIoError + '_ {
     }
 }
 
-/// Whether a scan's colour limits (or, without limits, its colour records' type) fit
-/// 8 bits.
+/// Whether every colour channel of a scan fits 8 bits: its limit's maximum (an
+/// integer), or without one its record's integer type (the range `e57` normalises by).
 fn eight_bit(scan: &e57::PointCloud) -> bool {
-    let fits = |v: &Option<e57::RecordValue>| match v {
-        Some(e57::RecordValue::Integer(i) | e57::RecordValue::ScaledInteger(i)) => *i <= 255,
-        Some(e57::RecordValue::Single(_) | e57::RecordValue::Double(_)) => false,
-        None => true,
+    let record_fits = |name: &e57::RecordName| {
+        scan.prototype.iter().filter(|r| r.name == *name).all(|r| {
+            matches!(r.data_type, e57::RecordDataType::Integer { min, max } if min >= 0 && max <= 255)
+        })
     };
-    match &scan.color_limits {
-        Some(l) => fits(&l.red_max) && fits(&l.green_max) && fits(&l.blue_max),
-        None => scan
-            .prototype
-            .iter()
-            .filter(|r| {
-                matches!(
-                    r.name,
-                    e57::RecordName::ColorRed
-                        | e57::RecordName::ColorGreen
-                        | e57::RecordName::ColorBlue
-                )
-            })
-            .all(|r| matches!(r.data_type, e57::RecordDataType::Integer { max, .. } if max <= 255)),
-    }
+    let limits = scan.color_limits.as_ref();
+    [
+        (
+            limits.and_then(|l| l.red_max.as_ref()),
+            e57::RecordName::ColorRed,
+        ),
+        (
+            limits.and_then(|l| l.green_max.as_ref()),
+            e57::RecordName::ColorGreen,
+        ),
+        (
+            limits.and_then(|l| l.blue_max.as_ref()),
+            e57::RecordName::ColorBlue,
+        ),
+    ]
+    .iter()
+    .all(|(max, name)| match max {
+        Some(e57::RecordValue::Integer(i)) => *i <= 255,
+        Some(_) => false,
+        None => record_fits(name),
+    })
 }
 
 /// Read every scan of an E57 file.
@@ -185,7 +191,8 @@ pub(crate) fn write(points: &Points, path: &Path) -> Result<(), CloudIoError> {
         values.clear();
         values.extend([p.x, p.y, p.z].map(e57::RecordValue::Double));
         if let Some(c) = &points.colors {
-            values.extend(c.values[i].map(|v| e57::RecordValue::Integer(i64::from(v))));
+            let top = c.scale.max_value();
+            values.extend(c.values[i].map(|v| e57::RecordValue::Integer(i64::from(v.min(top)))));
         }
         if let Some(intensities) = &points.intensities {
             let v = intensities[i];

@@ -36,7 +36,8 @@ pub enum CloudIoError {
         /// The header's point count, if the header could be read.
         announced: Option<u64>,
         /// What the file holds instead (for LAS and binary PLY, the points its bytes
-        /// hold; for LAZ, ASCII PLY and E57, the points decoded before its data ended).
+        /// hold; for LAZ and ASCII PLY, the points decoded before its data ended). E57
+        /// files that end early are [`CloudIoError::E57`] errors.
         found: String,
     },
     /// A PLY file that breaks the format or holds no usable vertex.

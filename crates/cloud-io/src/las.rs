@@ -214,10 +214,13 @@ fn decode_points(
     let mut raw_intensity: Vec<u16> = Vec::new();
     let has_rgb = format.has_color;
     let mut chunk = las::PointDataBuilder::new().for_header(&header).build();
-    // A LAZ file's requests grow with its size (a compressed point takes a byte or
-    // more), so that a small file that lies about its count allocates little.
+    // `las` sizes its buffer from a request before decoding it: a LAZ file's requests
+    // are budgeted in bytes, growing with the file's size (4 to 64 MiB), so that a
+    // small file that lies about its count, or has long records, allocates little. (An
+    // uncompressed file's count was checked against its size above.)
     let chunk_points = if format.is_compressed {
-        file_bytes.clamp(LAS_CHUNK_POINTS, LAZ_CHUNK_POINTS)
+        let record_bytes = u64::from(raw.point_data_record_length).max(1);
+        (file_bytes.clamp(4 << 20, 64 << 20) / record_bytes).clamp(1, LAZ_CHUNK_POINTS)
     } else {
         LAS_CHUNK_POINTS
     };
@@ -374,13 +377,14 @@ impl LasGrid {
 }
 
 /// Write points as LAS (or LAZ, by the `.laz` extension) on `grid`: LAS 1.2, point
-/// format 2, 16-bit colour (8-bit colours as `v · 257`; grey levels of the normalised
-/// intensity when there is no colour, black when neither), intensity rounded to
-/// 16 bits (normalised by its maximum unless it is already within `[0, 65535]`).
+/// format 2 with 16-bit colour (8-bit colours as `v · 257`), or format 0 without
+/// colour; intensity rounded to 16 bits (normalised by its maximum unless it is
+/// already within `[0, 65535]`; 0 without intensity).
 pub(crate) fn write(points: &Points, path: &Path, grid: LasGrid) -> Result<(), CloudIoError> {
     let err = las_error(path);
     let mut builder = las::Builder::from((1, 2));
-    builder.point_format = las::point::Format::new(2).map_err(&err)?;
+    let format = if points.colors.is_some() { 2 } else { 0 };
+    builder.point_format = las::point::Format::new(format).map_err(&err)?;
     builder.generating_software = "pgm-omni-vvs cloud-io".into();
     let axis = |scale: f64, offset: f64| las::Transform { scale, offset };
     builder.transforms = las::Vector {
@@ -393,19 +397,19 @@ pub(crate) fn write(points: &Points, path: &Path, grid: LasGrid) -> Result<(), C
     let mut writer = las::Writer::from_path(path, header).map_err(&err)?;
     for (i, p) in points.positions_m.iter().enumerate() {
         let intensity = intensity_16.as_ref().map_or(0, |v| v[i]);
-        let rgb = match &points.colors {
-            Some(c) => match c.scale {
+        let color = points.colors.as_ref().map(|c| {
+            let rgb = match c.scale {
                 ColorScale::EightBit => c.values[i].map(|v| v.min(255) * 257),
                 ColorScale::SixteenBit => c.values[i],
-            },
-            None => [intensity; 3],
-        };
+            };
+            las::Color::new(rgb[0], rgb[1], rgb[2])
+        });
         let point = las::Point {
             x: p.x,
             y: p.y,
             z: p.z,
             intensity,
-            color: Some(las::Color::new(rgb[0], rgb[1], rgb[2])),
+            color,
             ..Default::default()
         };
         writer.write_point(point).map_err(&err)?;

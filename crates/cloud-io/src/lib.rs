@@ -222,8 +222,10 @@ pub fn write_cloud(cloud: &PointCloud, path: impl AsRef<Path>) -> Result<(), Clo
 }
 
 /// Convert a cloud file into another format (by the output's extension), keeping its
-/// `f64` coordinates and its colours (8- or 16-bit) exactly, and intensities; a LAS
-/// or LAZ source keeps its grid when written as LAS or LAZ. Returns what was read.
+/// `f64` coordinates and its colours (8- or 16-bit) exactly; a LAS or LAZ source keeps
+/// its grid when written as LAS or LAZ. Intensities go along as each format stores
+/// them (E57's normalised to `[0, 1]`, LAS's rounded to 16 bits). Returns what was
+/// read.
 pub fn convert(
     input: impl AsRef<Path>,
     output: impl AsRef<Path>,
@@ -280,17 +282,15 @@ pub(crate) fn intensity_to_u16(intensities: Option<&[f32]>) -> Option<Vec<u16>> 
     let values = intensities?;
     let clean = |v: f32| if v > 0.0 && v.is_finite() { v } else { 0.0 };
     let max = values.iter().copied().map(clean).fold(0.0f32, f32::max);
-    let scale = if max > 1.0 && max <= 65_535.0 {
-        1.0
-    } else if max > 0.0 {
-        65_535.0 / max
-    } else {
-        0.0
-    };
+    let keep = max > 1.0 && max <= 65_535.0;
     Some(
         values
             .iter()
-            .map(|&v| (clean(v) * scale).round().min(65_535.0) as u16)
+            .map(|&v| match (keep, max > 0.0) {
+                (true, _) => clean(v).round() as u16,
+                (false, true) => (f64::from(clean(v)) / f64::from(max) * 65_535.0).round() as u16,
+                (false, false) => 0,
+            })
             .collect(),
     )
 }

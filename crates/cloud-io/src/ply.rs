@@ -84,6 +84,20 @@ impl Scalar {
         })
     }
 
+    /// The format's name of the type.
+    fn name(self) -> &'static str {
+        match self {
+            Self::I8 => "char",
+            Self::U8 => "uchar",
+            Self::I16 => "short",
+            Self::U16 => "ushort",
+            Self::I32 => "int",
+            Self::U32 => "uint",
+            Self::F32 => "float",
+            Self::F64 => "double",
+        }
+    }
+
     fn bytes(self) -> usize {
         match self {
             Self::I8 | Self::U8 => 1,
@@ -443,9 +457,9 @@ impl Sink {
                 Role::Red => rgb[0] = channel(scalar, v),
                 Role::Green => rgb[1] = channel(scalar, v),
                 Role::Blue => rgb[2] = channel(scalar, v),
-                Role::Grey => rgb = [channel(scalar, v); 3],
+                Role::Grey if self.layout.color.is_none() => rgb = [channel(scalar, v); 3],
                 Role::Intensity => intensity = v as f32,
-                Role::Other => {}
+                Role::Grey | Role::Other => {}
             }
         }
         self.positions.push(p);
@@ -527,7 +541,7 @@ pub(crate) fn read(path: &Path) -> Result<(Points, PlyInfo), CloudIoError> {
             .properties
             .iter()
             .map(|p| match p {
-                Property::Scalar { name, scalar } => format!("{scalar:?} {name}").to_lowercase(),
+                Property::Scalar { name, scalar } => format!("{} {name}", scalar.name()),
                 Property::List { .. } => "list".to_owned(),
             })
             .collect(),
@@ -604,10 +618,15 @@ pub(crate) fn read(path: &Path) -> Result<(Points, PlyInfo), CloudIoError> {
                     Some(here)
                 })
                 .collect();
-            let mut buffer = vec![0u8; record * CHUNK_VERTICES];
+            // At most 4 MiB a chunk, and no more vertices than announced (which the
+            // file's size bounds): a header of many properties allocates little.
+            let chunk = CHUNK_VERTICES
+                .min(vertex.count as usize)
+                .min(((4 << 20) / record).max(1));
+            let mut buffer = vec![0u8; record * chunk];
             let mut left = vertex.count as usize;
             while left > 0 {
-                let n = left.min(CHUNK_VERTICES);
+                let n = left.min(chunk);
                 let chunk = &mut buffer[..n * record];
                 reader.read_exact(chunk).map_err(io_error)?;
                 for r in chunk.chunks_exact(record) {

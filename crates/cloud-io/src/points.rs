@@ -144,8 +144,7 @@ impl Points {
                 let clean = |v: f32| if v > 0.0 && v.is_finite() { v } else { 0.0 };
                 let max = raw.iter().copied().map(clean).fold(0.0f32, f32::max);
                 if max > 0.0 {
-                    let inv = 1.0 / max;
-                    let intensities = raw.iter().map(|&v| clean(v) * inv).collect();
+                    let intensities = raw.iter().map(|&v| clean(v) / max).collect();
                     (intensities, None, IntensitySource::IntensityAttribute)
                 } else {
                     (

@@ -95,6 +95,15 @@ fn las_laz_ply_e57_and_back_keep_coordinates_and_16_bit_colour() {
             "{p} vs {q}"
         );
     }
+    // A PLY of coordinates alone written as LAS reads back without colour (point
+    // format 0), not black: the renderer's constant intensity.
+    let las = dir.join("xyz.las");
+    convert(fixture("cloudcompare_bin_xyz.ply"), &las).unwrap();
+    let (points, info) = read_points(&las).unwrap();
+    assert!(points.colors.is_none());
+    assert_eq!(las_info(info).point_format, 0);
+    let (_, _, source) = cloud_io::read_cloud(&las).unwrap();
+    assert_eq!(source, cloud_io::IntensitySource::Constant);
     // An unknown input and a wrong output name are errors, and nothing is written.
     assert!(convert(dir.join("missing.ply"), dir.join("x.las")).is_err());
     assert!(convert(&start, dir.join("x.txt")).is_err());

@@ -249,6 +249,18 @@ fn grey_and_intensity_without_colour() {
     .unwrap();
     let (cloud, _, source) = read_cloud(&path).unwrap();
     assert_eq!(source, IntensitySource::IntensityAttribute);
+    // A grey property after the colour does not replace it.
+    std::fs::write(
+        &path,
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+         property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+         property uchar grey\nend_header\n0 0 0 10 20 30 99\n",
+    )
+    .unwrap();
+    assert_eq!(
+        read_points(&path).unwrap().0.colors.unwrap().values,
+        [[10, 20, 30]]
+    );
     let mut intensities: Vec<f32> = cloud.decoded().map(|(_, i)| i).collect();
     intensities.sort_by(f32::total_cmp);
     assert!((intensities[0] - 0.25).abs() < 1e-4 && (intensities[1] - 1.0).abs() < 1e-4);
@@ -376,6 +388,25 @@ fn files_that_lie_or_break_the_format_are_errors() {
         let (points, _) = read_points(&path).unwrap();
         assert_eq!(points.positions_m, [DVec3::new(1.0, 2.0, 3.0)], "{format}");
     }
+    // Three thousand unused double properties (a 24 KB record) and one vertex: read,
+    // with a buffer of one record, not of a chunk of them.
+    let mut header = String::from(
+        "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
+         property float y\nproperty float z\n",
+    );
+    for k in 0..3000 {
+        header += &format!("property double extra{k}\n");
+    }
+    header += "end_header\n";
+    let mut bytes = header.into_bytes();
+    for v in [4f32, 5.0, 6.0] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    bytes.extend(std::iter::repeat_n(0u8, 3000 * 8));
+    std::fs::write(&path, &bytes).unwrap();
+    let (points, info) = read_points(&path).unwrap();
+    assert_eq!(points.positions_m, [DVec3::new(4.0, 5.0, 6.0)]);
+    assert_eq!(ply_info(info).properties[3], "double extra0");
     // A vertex count of zero: no point.
     std::fs::write(
         &path,
