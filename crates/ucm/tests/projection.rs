@@ -356,10 +356,7 @@ fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
     // Without k3 the corners' rays lie beyond the fold of k1 and k2 alone, and a pixel
     // halfway to the corner moves by more than half a pixel.
     let corner = camera.unproject([0.0, 0.0]).unwrap();
-    assert_eq!(
-        without_k3.project(corner),
-        Err(ucm::OutOfView::DistortionFold)
-    );
+    assert_eq!(without_k3.project(corner), Err(OutOfView::DistortionFold));
     let halfway = camera.unproject([160.0, 128.0]).unwrap();
     let moved: [f64; 2] = without_k3.project(halfway).unwrap();
     assert!(
