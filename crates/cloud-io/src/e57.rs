@@ -186,9 +186,9 @@ pub(crate) fn write(points: &Points, path: &Path) -> Result<(), CloudIoError> {
             intensity_max: Some(e57::RecordValue::Single(if max > 0.0 { max } else { 1.0 })),
         }));
     }
-    let mut values = Vec::with_capacity(7);
     for (i, p) in points.positions_m.iter().enumerate() {
-        values.clear();
+        // `add_point` takes the values: one vector a point.
+        let mut values = Vec::with_capacity(7);
         values.extend([p.x, p.y, p.z].map(e57::RecordValue::Double));
         if let Some(c) = &points.colors {
             let top = c.scale.max_value();
@@ -202,7 +202,7 @@ pub(crate) fn write(points: &Points, path: &Path) -> Result<(), CloudIoError> {
                 0.0
             }));
         }
-        scan.add_point(values.clone()).map_err(&err)?;
+        scan.add_point(values).map_err(&err)?;
     }
     scan.finalize().map_err(&err)?;
     writer.finalize().map_err(&err)?;

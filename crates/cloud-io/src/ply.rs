@@ -487,6 +487,9 @@ impl Sink {
 /// Reads whitespace-separated tokens of an ASCII body.
 struct Tokens<R> {
     reader: R,
+    /// The current line's bytes (reused from line to line).
+    bytes: Vec<u8>,
+    /// Its text (reused too).
     line: String,
     pos: usize,
     line_number: u64,
@@ -506,13 +509,13 @@ impl<R: BufRead> Tokens<R> {
                 return Ok(Some(&self.line[begin..begin + len]));
             }
             self.line.clear();
+            self.bytes.clear();
             self.pos = 0;
-            let mut bytes = Vec::new();
-            if self.reader.read_until(b'\n', &mut bytes)? == 0 {
+            if self.reader.read_until(b'\n', &mut self.bytes)? == 0 {
                 return Ok(None);
             }
             self.line_number += 1;
-            self.line = String::from_utf8_lossy(&bytes).into_owned();
+            self.line.push_str(&String::from_utf8_lossy(&self.bytes));
         }
     }
 }
@@ -553,6 +556,7 @@ pub(crate) fn read(path: &Path) -> Result<(Points, PlyInfo), CloudIoError> {
         PlyEncoding::Ascii => {
             let mut tokens = Tokens {
                 reader,
+                bytes: Vec::new(),
                 line: String::new(),
                 pos: 0,
                 line_number: 0,

@@ -197,10 +197,41 @@ fn read_associations(path: &Path) -> Result<Associations, RgbdError> {
 /// motion-capture system loses the camera now and then: an error when the frame is
 /// used, not when the dataset is read).
 fn interpolate_poses(
-    path: &Path,
+    stamped: &[(f64, Isometry3)],
     times_s: &[f64],
     max_gap_s: f64,
-) -> Result<Vec<Result<Isometry3, String>>, RgbdError> {
+) -> Vec<Result<Isometry3, String>> {
+    times_s
+        .iter()
+        .map(|&time| {
+            let after = stamped.partition_point(|(t, _)| *t < time);
+            if let Some((t, pose)) = stamped.get(after)
+                && *t == time
+            {
+                return Ok(*pose);
+            }
+            let (Some((t0, p0)), Some((t1, p1))) = (
+                after.checked_sub(1).and_then(|i| stamped.get(i)),
+                stamped.get(after),
+            ) else {
+                return Err(format!("no pose on both sides of its time {time:.6} s"));
+            };
+            if t1 - t0 > max_gap_s {
+                return Err(format!(
+                    "the poses around its time {time:.6} s are {:.3} s apart (max_gap_s = {max_gap_s})",
+                    t1 - t0
+                ));
+            }
+            let a = (time - t0) / (t1 - t0);
+            let translation = p0.translation.lerp(p1.translation, a);
+            let rotation = p0.rotation.slerp(p1.rotation, a).normalize();
+            Ok(Isometry3::from_rotation_translation(rotation, translation))
+        })
+        .collect()
+}
+
+/// Timestamped lines `t tx ty tz qx qy qz qw` (`world_from_camera`), in increasing time.
+fn read_stamped_poses(path: &Path) -> Result<Vec<(f64, Isometry3)>, RgbdError> {
     let mut stamped: Vec<(f64, Isometry3)> = Vec::new();
     for (line, n) in number_lines(path)? {
         if n.len() != 8 {
@@ -229,33 +260,7 @@ fn interpolate_poses(
         }
         stamped.push((n[0], Isometry3::from_rotation_translation(q.normalize(), t)));
     }
-    Ok(times_s
-        .iter()
-        .map(|&time| {
-            let after = stamped.partition_point(|(t, _)| *t < time);
-            if let Some((t, pose)) = stamped.get(after)
-                && *t == time
-            {
-                return Ok(*pose);
-            }
-            let (Some((t0, p0)), Some((t1, p1))) = (
-                after.checked_sub(1).and_then(|i| stamped.get(i)),
-                stamped.get(after),
-            ) else {
-                return Err(format!("no pose on both sides of its time {time:.6} s"));
-            };
-            if t1 - t0 > max_gap_s {
-                return Err(format!(
-                    "the poses around its time {time:.6} s are {:.3} s apart (max_gap_s = {max_gap_s})",
-                    t1 - t0
-                ));
-            }
-            let a = (time - t0) / (t1 - t0);
-            let translation = p0.translation.lerp(p1.translation, a);
-            let rotation = p0.rotation.slerp(p1.rotation, a).normalize();
-            Ok(Isometry3::from_rotation_translation(rotation, translation))
-        })
-        .collect())
+    Ok(stamped)
 }
 
 /// A described folder of RGB-D frames.
@@ -683,8 +688,9 @@ impl RgbdDataset {
                 }
                 // The depth camera's poses at the depth pictures' times, the colour
                 // camera's at the colour pictures'.
-                let at_depth = interpolate_poses(&root.join(path), depth_times, *max_gap_s)?;
-                let at_color = interpolate_poses(&root.join(path), color_times, *max_gap_s)?;
+                let stamped = read_stamped_poses(&root.join(path))?;
+                let at_depth = interpolate_poses(&stamped, depth_times, *max_gap_s);
+                let at_color = interpolate_poses(&stamped, color_times, *max_gap_s);
                 let color_camera_poses = at_color
                     .into_iter()
                     .map(|p| {
