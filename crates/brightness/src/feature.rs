@@ -1,11 +1,23 @@
 //! [`Brightness`]: intensities of the valid pixels and their interaction matrix.
 
+use std::sync::Arc;
+
 use frame::AnyImage;
 use ucm::{Camera, PixelGrid};
 
 use crate::BrightnessError;
 use crate::gradient::MaskedGradient;
 use crate::photometric;
+
+/// A camera's tables, shared by the features of that camera.
+struct Tables {
+    grid: Arc<PixelGrid>,
+    gradient_plan: Arc<MaskedGradient>,
+    valid_runs: Arc<[[u32; 2]]>,
+    factors_u: Arc<[[f32; 6]]>,
+    factors_v: Arc<[[f32; 6]]>,
+    samples: Arc<[u32]>,
+}
 
 /// The picture a rendering is compared with on their common support
 /// ([`Brightness::compute_against`]).
@@ -21,18 +33,20 @@ pub struct Against<'a> {
 /// The brightness feature of one camera, with its buffers (no allocation per image).
 #[derive(Debug, Clone)]
 pub struct Brightness {
-    grid: PixelGrid,
-    gradient_plan: MaskedGradient,
+    /// The camera's tables, set up once and shared by the clones of a feature (a
+    /// clone allocates its own buffers only).
+    grid: Arc<PixelGrid>,
+    gradient_plan: Arc<MaskedGradient>,
     /// `[start, end)` row-major runs of valid pixels.
-    valid_runs: Vec<[u32; 2]>,
+    valid_runs: Arc<[[u32; 2]]>,
     /// The rows `[T_u | R_u]` and `[T_v | R_v]` of the valid pixels' factors
     /// ([`PixelGrid::factors`]), one run after the other: what the interaction rows
     /// read, contiguous.
-    factors_u: Vec<[f32; 6]>,
-    factors_v: Vec<[f32; 6]>,
+    factors_u: Arc<[[f32; 6]]>,
+    factors_v: Arc<[[f32; 6]]>,
     width: usize,
     height: usize,
-    samples: Vec<u32>,
+    samples: Arc<[u32]>,
     /// Whether each pixel of the last picture holds an intensity (false outside the
     /// region).
     observed: Vec<bool>,
@@ -67,8 +81,6 @@ impl Brightness {
             .filter(|(_, v)| **v)
             .map(|(k, _)| k as u32)
             .collect();
-        let n = camera.pixel_count();
-        let m = samples.len();
         let (width, height) = (camera.width() as usize, camera.height() as usize);
         let gradient_plan = MaskedGradient::new(grid.valid(), width, height);
         let mut valid_runs: Vec<[u32; 2]> = Vec::new();
@@ -78,35 +90,86 @@ impl Brightness {
                 _ => valid_runs.push([k, k + 1]),
             }
         }
-        let (factors_u, factors_v) = samples
+        let (factors_u, factors_v): (Vec<_>, Vec<_>) = samples
             .iter()
             .map(|&k| photometric::factor_rows(&grid.factors()[k as usize]))
             .unzip();
+        Self::with_buffers(Tables {
+            grid: Arc::new(grid),
+            gradient_plan: Arc::new(gradient_plan),
+            valid_runs: valid_runs.into(),
+            factors_u: factors_u.into(),
+            factors_v: factors_v.into(),
+            samples: samples.into(),
+        })
+        .with_size(width, height)
+    }
+
+    /// A feature of the same camera, with buffers of its own but sharing the camera's
+    /// tables (its pixel grid, gradient plan and samples): [`Brightness::new`] without
+    /// setting them up again. Not normalised.
+    pub fn sharing_tables(&self) -> Self {
+        Self::with_buffers(Tables {
+            grid: Arc::clone(&self.grid),
+            gradient_plan: Arc::clone(&self.gradient_plan),
+            valid_runs: Arc::clone(&self.valid_runs),
+            factors_u: Arc::clone(&self.factors_u),
+            factors_v: Arc::clone(&self.factors_v),
+            samples: Arc::clone(&self.samples),
+        })
+        .with_size(self.width, self.height)
+    }
+
+    /// The feature of these tables, its buffers allocated (sized by `with_size`).
+    fn with_buffers(tables: Tables) -> Self {
+        let Tables {
+            grid,
+            gradient_plan,
+            valid_runs,
+            factors_u,
+            factors_v,
+            samples,
+        } = tables;
         Self {
             grid,
             gradient_plan,
             valid_runs,
             factors_u,
             factors_v,
-            width,
-            height,
+            width: 0,
+            height: 0,
             samples,
-            observed: vec![false; n],
+            observed: Vec::new(),
             all_observed: true,
             observed_gradient: MaskedGradient::default(),
             compared: Vec::new(),
             against_observed: Vec::new(),
             compared_gradient: Vec::new(),
-            image: vec![0.0; n],
-            inverse_range: vec![0.0; n],
-            gradient: vec![[0.0; 2]; n],
-            pixel_interaction: vec![[0.0; 6]; n],
-            values: vec![0.0; m],
-            interaction: vec![[0.0; 6]; m],
+            image: Vec::new(),
+            inverse_range: Vec::new(),
+            gradient: Vec::new(),
+            pixel_interaction: Vec::new(),
+            values: Vec::new(),
+            interaction: Vec::new(),
             normalize: false,
             scale: 1.0,
             mean: 0.0,
         }
+    }
+
+    /// Size the buffers for a `width × height` camera.
+    fn with_size(mut self, width: usize, height: usize) -> Self {
+        let (n, m) = (width * height, self.samples.len());
+        self.width = width;
+        self.height = height;
+        self.observed = vec![false; n];
+        self.image = vec![0.0; n];
+        self.inverse_range = vec![0.0; n];
+        self.gradient = vec![[0.0; 2]; n];
+        self.pixel_interaction = vec![[0.0; 6]; n];
+        self.values = vec![0.0; m];
+        self.interaction = vec![[0.0; 6]; m];
+        self
     }
 
     /// Centre and normalise the brightness (zero mean, unit norm over the observed
@@ -270,7 +333,7 @@ impl Brightness {
         // there; the inverse ranges are zeroed between the valid runs.
         let mut end = 0;
         let mut all_observed = true;
-        for &[start, stop] in &self.valid_runs {
+        for &[start, stop] in self.valid_runs.iter() {
             let run = start as usize..stop as usize;
             self.inverse_range[end..run.start].fill(0.0);
             picture.observed_intensity(run.clone(), &mut self.image[run.clone()]);
@@ -301,7 +364,7 @@ impl Brightness {
                 .sum::<f64>()
                 .sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
-            for &k in &self.samples {
+            for &k in self.samples.iter() {
                 let k = k as usize;
                 self.image[k] = ((f64::from(self.image[k]) - mean) * scale) as f32;
             }
@@ -332,7 +395,7 @@ impl Brightness {
                 .sum::<f64>()
                 .sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
-            for &k in &self.samples {
+            for &k in self.samples.iter() {
                 let k = k as usize;
                 self.image[k] = if self.observed[k] {
                     ((f64::from(self.image[k]) - mean) * scale) as f32
@@ -347,7 +410,7 @@ impl Brightness {
             .rebuild(&self.observed, self.width, self.height);
         self.observed_gradient
             .compute(&self.image, &self.observed, &mut self.gradient);
-        for &k in &self.samples {
+        for &k in self.samples.iter() {
             if !self.observed[k as usize] {
                 self.gradient[k as usize] = [0.0; 2];
             }
@@ -360,7 +423,7 @@ impl Brightness {
     #[inline(always)]
     fn rows(&mut self) {
         let mut first = 0;
-        for &[start, end] in &self.valid_runs {
+        for &[start, end] in self.valid_runs.iter() {
             let (run, n) = (start as usize..end as usize, (end - start) as usize);
             photometric::rows(photometric::Run {
                 u: &self.factors_u[first..first + n],

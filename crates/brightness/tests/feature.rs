@@ -136,6 +136,28 @@ fn holed_scene() -> (Camera, Frame) {
     (camera, frame)
 }
 
+/// A feature sharing another's tables (`Brightness::sharing_tables`) computes what
+/// `Brightness::new` computes, bit for bit, after the other has computed something
+/// else; so does a PGM built on it (`Pgm::from_brightness` is `pgm`'s, tested there).
+#[test]
+fn a_feature_sharing_tables_computes_what_a_new_one_does() {
+    let (camera, frame) = holed_scene();
+    let mut first = Brightness::new(&camera).with_normalization(true);
+    first.compute(&frame).unwrap();
+    let mut shared = first.sharing_tables().with_normalization(true);
+    let mut new = Brightness::new(&camera).with_normalization(true);
+    let mut other = frame.clone();
+    other.intensity.iter_mut().for_each(|i| *i = 1.0 - *i);
+    first.compute(&other).unwrap();
+    shared.compute(&frame).unwrap();
+    new.compute(&frame).unwrap();
+    assert_eq!(shared.samples(), new.samples());
+    assert_eq!(shared.values(), new.values());
+    assert_eq!(shared.interaction(), new.interaction());
+    assert_eq!(shared.gradient(), new.gradient());
+    assert_ne!(first.values(), new.values());
+}
+
 /// A picture that holds intensities on part of the region is normalised over those
 /// pixels alone, is 0 elsewhere, and has its gradient inside them.
 #[test]

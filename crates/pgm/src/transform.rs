@@ -288,6 +288,13 @@ fn interpolation(
 impl Pgm {
     /// The feature for `camera`. Samples are the valid pixels on the stride lattice.
     pub fn new(camera: &Camera, options: PgmOptions) -> Result<Self, PgmError> {
+        Self::from_brightness(Brightness::new(camera), options)
+    }
+
+    /// [`Pgm::new`] for the camera of `brightness` (a [`Brightness::new`] of it, or one
+    /// sharing its tables: [`Brightness::sharing_tables`]), whose normalisation is set
+    /// to `options.normalize`.
+    pub fn from_brightness(brightness: Brightness, options: PgmOptions) -> Result<Self, PgmError> {
         if !(options.kernel_radius_lambdas >= 1.0 && options.kernel_radius_lambdas.is_finite()) {
             return Err(PgmError::Option {
                 name: "kernel_radius_lambdas",
@@ -316,8 +323,8 @@ impl Pgm {
                 message: "must be >= 1".into(),
             });
         }
-        let brightness = Brightness::new(camera).with_normalization(options.normalize);
-        let (width, height) = (camera.width() as usize, camera.height() as usize);
+        let brightness = brightness.with_normalization(options.normalize);
+        let (width, height) = (brightness.width(), brightness.height());
         let s = options.stride as usize;
         let valid = brightness.valid();
         let samples: Vec<u32> = (0..height)

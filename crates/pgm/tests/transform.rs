@@ -339,6 +339,30 @@ fn transform_is_deterministic_across_thread_counts() {
     assert_eq!(results[0].2, results[1].2);
 }
 
+/// A PGM built on a brightness sharing another's tables (`Pgm::from_brightness`, as
+/// the optimiser builds its features) gives `Pgm::new`'s bits, normalised or not.
+#[test]
+fn a_pgm_from_a_shared_brightness_is_a_new_one() {
+    let camera =
+        Camera::load_toml(crate::common::root().join("fixtures/omni-320x240.toml")).unwrap();
+    let frame = crate::common::street_like(&camera);
+    let tables = brightness::Brightness::new(&camera);
+    for normalize in [false, true] {
+        let options = PgmOptions {
+            normalize,
+            ..PgmOptions::default()
+        };
+        let mut new = Pgm::new(&camera, options).unwrap();
+        let mut shared = Pgm::from_brightness(tables.sharing_tables(), options).unwrap();
+        for pgm in [&mut new, &mut shared] {
+            pgm.compute(&frame, 7.0, PgmJacobian::Convolved).unwrap();
+        }
+        assert_eq!(new.values(), shared.values());
+        assert_eq!(new.j_lambda(), shared.j_lambda());
+        assert_eq!(new.interaction(), shared.interaction());
+    }
+}
+
 /// A Jacobian is written by its name, and read back (files, protocols, the optimiser's
 /// TOML).
 #[test]

@@ -19,6 +19,7 @@ use glam::DVec3;
 
 use crate::SplatError;
 use crate::rng::SplitMix64;
+use rayon::prelude::*;
 
 /// Rec. 709 luminance of an 8-bit-per-channel colour, in `[0, 1]`.
 #[inline]
@@ -65,6 +66,8 @@ pub struct PointCloud {
     cell_size_m: f32,
     /// The cell's edge over 65 535.
     step_m: f64,
+    /// Axis-aligned bounds of the decoded points, world coordinates (set once built).
+    bounds: (DVec3, DVec3),
 }
 
 /// Steps along a cell's edge: positions are rounded to the edge over this.
@@ -154,24 +157,27 @@ impl PointCloud {
                 message: format!("the cloud's origin {origin} is not finite"),
             });
         }
-        for (index, p) in positions.iter().enumerate() {
+        // The first bad point, found on rayon's threads.
+        let bad_point = positions.par_iter().position_first(|p| {
+            !(p.is_finite() && (*p - origin).abs().max_element() <= MAX_OFFSET_M)
+        });
+        if let Some(index) = bad_point {
+            let p = positions[index];
             if !p.is_finite() {
                 return Err(SplatError::NonFinitePoint {
                     index,
                     value: p.to_array(),
                 });
             }
-            let offset = (*p - origin).abs().max_element();
-            if !(offset <= MAX_OFFSET_M) {
-                return Err(SplatError::Parameter {
-                    name: "positions",
-                    message: format!(
-                        "point {index} at {p} lies {offset:.3e} m from the origin {origin}; \
-                         cells are located in f32 relative to the origin and must stay \
-                         within {MAX_OFFSET_M:.0e} m of it"
-                    ),
-                });
-            }
+            let offset = (p - origin).abs().max_element();
+            return Err(SplatError::Parameter {
+                name: "positions",
+                message: format!(
+                    "point {index} at {p} lies {offset:.3e} m from the origin {origin}; \
+                     cells are located in f32 relative to the origin and must stay \
+                     within {MAX_OFFSET_M:.0e} m of it"
+                ),
+            });
         }
         if let Some(index) = intensities.iter().position(|i| !i.is_finite()) {
             return Err(SplatError::Parameter {
@@ -194,66 +200,94 @@ impl PointCloud {
             let c = ((*p - origin) * inv).floor();
             (c.x as i64, c.y as i64, c.z as i64)
         };
-        let mut rng = SplitMix64::new(0x5EED_CE11);
+        // The shuffle's random keys: the generator's sequence, point by point.
+        const SHUFFLE_SEED: u64 = 0x5EED_CE11;
         let mut order: Vec<(i64, i64, i64, u64, u32)> = positions
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(i, p)| {
                 let (x, y, z) = key(p);
-                (x, y, z, rng.next_u64(), i as u32)
+                (
+                    x,
+                    y,
+                    z,
+                    SplitMix64::nth_value(SHUFFLE_SEED, i as u64),
+                    i as u32,
+                )
             })
             .collect();
         // Every key holds the point's index, so any sort gives the same order: sorted
         // on rayon's threads.
-        {
-            use rayon::slice::ParallelSliceMut;
-            order.par_sort_unstable();
-        }
+        order.par_sort_unstable();
 
+        // Each point rounded to a step of its cell (clamped: the cell's key was floored
+        // in f64), in that order.
         let cell_m = f64::from(cell_size_m);
         let step_m = cell_m / STEPS;
-        let mut points = Vec::with_capacity(n);
-        let mut sorted_colors = colors.as_ref().map(|_| Vec::with_capacity(n));
-        let mut cells = Vec::new();
-        let mut start = 0usize;
-        while start < n {
-            let k = (order[start].0, order[start].1, order[start].2);
-            let corner = DVec3::new(k.0 as f64, k.1 as f64, k.2 as f64) * cell_m;
-            let mut end = start;
-            let mut lo = DVec3::splat(f64::INFINITY);
-            let mut hi = DVec3::splat(f64::NEG_INFINITY);
-            while end < n && (order[end].0, order[end].1, order[end].2) == k {
-                let i = order[end].4 as usize;
-                // Rounded to a step (clamped: the cell's key was floored in f64).
-                let steps = ((positions[i] - origin - corner) / step_m)
+        let corner_of =
+            |o: &(i64, i64, i64, u64, u32)| DVec3::new(o.0 as f64, o.1 as f64, o.2 as f64) * cell_m;
+        let points: Vec<PackedPoint> = order
+            .par_iter()
+            .map(|o| {
+                let i = o.4 as usize;
+                let steps = ((positions[i] - origin - corner_of(o)) / step_m)
                     .round()
                     .clamp(DVec3::ZERO, DVec3::splat(STEPS));
-                let p = corner + steps * step_m;
-                lo = lo.min(p);
-                hi = hi.max(p);
-                points.push(PackedPoint {
+                PackedPoint {
                     steps: steps.to_array().map(|s| s as u16),
                     intensity: fixed_intensity(intensities[i]),
-                });
-                if let (Some(out), Some(c)) = (&mut sorted_colors, &colors) {
-                    out.push(c[i]);
                 }
-                end += 1;
-            }
-            let center = (lo + hi) * 0.5;
-            // The centre is kept in `f32` (and placed in the camera frame in `f32`):
-            // a margin of 1 mm, or four of its roundings if more (a cell over about
-            // 2 km from the origin), so that the sphere holds every point.
-            let margin = 1e-3f32.max(4.0 * center.abs().max_element() as f32 * f32::EPSILON);
-            cells.push(Cell {
-                start: start as u32,
-                len: (end - start) as u32,
-                corner_m: corner.to_array(),
-                center: center.as_vec3().to_array(),
-                radius: ((hi - lo).length() * 0.5) as f32 + margin,
-            });
-            start = end;
-        }
+            })
+            .collect();
+        let sorted_colors = colors.as_ref().map(|c| {
+            order
+                .par_iter()
+                .map(|o| c[o.4 as usize])
+                .collect::<Vec<_>>()
+        });
+        // The cells: runs of one key.
+        let starts: Vec<usize> = (0..n)
+            .into_par_iter()
+            .filter(|&i| {
+                let cell = |o: &(i64, i64, i64, u64, u32)| (o.0, o.1, o.2);
+                i == 0 || cell(&order[i]) != cell(&order[i - 1])
+            })
+            .collect();
+        let cells_and_bounds: Vec<(Cell, DVec3, DVec3)> = starts
+            .par_iter()
+            .enumerate()
+            .map(|(c, &start)| {
+                let end = starts.get(c + 1).copied().unwrap_or(n);
+                let corner = corner_of(&order[start]);
+                let mut lo = DVec3::splat(f64::INFINITY);
+                let mut hi = DVec3::splat(f64::NEG_INFINITY);
+                for point in &points[start..end] {
+                    // As `decode` places it.
+                    let steps = DVec3::from_array(point.steps.map(f64::from));
+                    let p = corner + steps * step_m;
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+                let center = (lo + hi) * 0.5;
+                // The centre is kept in `f32` (and placed in the camera frame in `f32`):
+                // a margin of 1 mm, or four of its roundings if more (a cell over about
+                // 2 km from the origin), so that the sphere holds every point.
+                let margin = 1e-3f32.max(4.0 * center.abs().max_element() as f32 * f32::EPSILON);
+                let cell = Cell {
+                    start: start as u32,
+                    len: (end - start) as u32,
+                    corner_m: corner.to_array(),
+                    center: center.as_vec3().to_array(),
+                    radius: ((hi - lo).length() * 0.5) as f32 + margin,
+                };
+                (cell, lo, hi)
+            })
+            .collect();
+        let (lo, hi) = cells_and_bounds.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (_, l, h)| (lo.min(*l), hi.max(*h)),
+        );
+        let cells = cells_and_bounds.into_iter().map(|(c, ..)| c).collect();
         let mut cloud = Self {
             origin,
             points,
@@ -262,6 +296,7 @@ impl PointCloud {
             spacing_m: 0.0,
             cell_size_m,
             step_m,
+            bounds: (origin + lo, origin + hi),
         };
         cloud.spacing_m = match spacing_m {
             Some(s) => s,
@@ -395,13 +430,7 @@ impl PointCloud {
 
     /// Axis-aligned bounds `(min, max)` of the points, in world coordinates.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        let mut lo = DVec3::splat(f64::INFINITY);
-        let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for (p, _) in self.decoded() {
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-        (self.origin + lo, self.origin + hi)
+        self.bounds
     }
 }
 

@@ -19,6 +19,13 @@ impl SplitMix64 {
         mix64(self.0)
     }
 
+    /// The `index`-th value (from 0) that a generator seeded with `seed` returns: its
+    /// sequence taken in any order (on several threads).
+    #[inline]
+    pub fn nth_value(seed: u64, index: u64) -> u64 {
+        mix64(seed.wrapping_add(index.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15)))
+    }
+
     /// Uniform in `[0, 1)`.
     #[inline]
     pub fn unit(&mut self) -> f64 {

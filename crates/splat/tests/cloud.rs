@@ -11,7 +11,7 @@ use splat::PointCloud;
 /// the world, with random intensities: each decodes within half a step (in every cell
 /// size) of its position, and its intensity within half of 1/65 535; every cell's
 /// sphere holds its points, the cloud's origin near them or 580 km away (where the
-/// centres' `f32` rounding exceeds a millimetre). Cells under a millimetre are refused.
+/// centres' `f32` rounding exceeds a millimetre); its bounds are the decoded points'. Cells under a millimetre are refused.
 #[test]
 fn points_decode_to_half_a_step() {
     let origin = DVec3::new(651_234.5, 6_862_345.25, 40.0);
@@ -50,6 +50,12 @@ fn points_decode_to_half_a_step() {
             assert_eq!(cloud.world_position(i), cloud_origin + p);
         }
         assert_eq!(cloud.point(cloud.len()), None);
+        // The bounds (kept from the build) are those of the decoded points.
+        let (lo, hi) = cloud.decoded().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (p, _)| (lo.min(p), hi.max(p)),
+        );
+        assert_eq!(cloud.bounds(), (cloud_origin + lo, cloud_origin + hi));
         // Every cell's bounding sphere holds its decoded points.
         for cell in cloud.cells() {
             let center = DVec3::from_array(cell.center.map(f64::from));
@@ -66,4 +72,19 @@ fn points_decode_to_half_a_step() {
             ..
         })
     ));
+}
+
+/// The generator's values taken by index (as the cloud's shuffle takes them on several
+/// threads) are its sequence.
+#[test]
+fn the_generators_values_by_index_are_its_sequence() {
+    for seed in [0, 17, 0x5EED_CE11, u64::MAX] {
+        let mut rng = splat::rng::SplitMix64::new(seed);
+        for index in 0..1000 {
+            assert_eq!(
+                splat::rng::SplitMix64::nth_value(seed, index),
+                rng.next_u64()
+            );
+        }
+    }
 }
