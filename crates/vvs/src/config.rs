@@ -155,6 +155,13 @@ pub struct VvsConfig {
     /// level (λ is in pixels, so it scales with the image); the coarse stages share
     /// step 1's budget (each at most `step1_max_iterations / stages`).
     pub pyramid_levels: u32,
+    /// Beyond the paper (`None`: off): coarse to fine within step 1. Each of step 1's
+    /// stages (λ*₁, then the λ schedule) runs at the coarsest of the `pyramid_levels`
+    /// levels at which its λ* (pixels: halved at each level) stays at least this many
+    /// pixels, in place of the pyramid's own stages; step 2 runs at full resolution.
+    /// A wide PGM changes little from one pixel to the next, and a level of half the
+    /// resolution renders and transforms about a third of the pixels' work.
+    pub coarse_min_lambda_px: Option<f32>,
     /// Beyond the paper (empty: off): a λ schedule, extra step-1 stages at full
     /// resolution after λ*₁, each with its own desired extent λ* (decreasing, pixels),
     /// λ starting at λ* and optimised, sharing step 1's budget like the pyramid's.
@@ -211,6 +218,7 @@ impl Default for VvsConfig {
             levenberg_marquardt: None,
             robust: None,
             pyramid_levels: 1,
+            coarse_min_lambda_px: None,
             lambda_schedule: Vec::new(),
             normalize: false,
             support: Support::Region,
@@ -316,8 +324,10 @@ impl VvsConfig {
                 format!("must be in 1..=4, got {}", self.pyramid_levels),
             );
         }
+        // The pyramid's own stages (coarse to fine places λ*₁ at a level that keeps
+        // it in range).
         let coarsest = self.lambda_star_step1 / (1u32 << (self.pyramid_levels - 1)) as f32;
-        if !pgm::LAMBDA_RANGE.contains(&coarsest) {
+        if self.coarse_min_lambda_px.is_none() && !pgm::LAMBDA_RANGE.contains(&coarsest) {
             return bad(
                 "pyramid_levels",
                 format!("λ*₁ at the coarsest level would be {coarsest} px, outside [0.5, 40]"),
@@ -328,7 +338,19 @@ impl VvsConfig {
                 return bad("lambda_schedule", format!("{l} is outside [0.5, 40] px"));
             }
         }
-        let stages = self.pyramid_levels as usize + self.lambda_schedule.len();
+        if let Some(l) = self.coarse_min_lambda_px
+            && !pgm::LAMBDA_RANGE.contains(&l)
+        {
+            return bad(
+                "coarse_min_lambda_px",
+                format!("{l} is outside [0.5, 40] px"),
+            );
+        }
+        let coarse_stages = match self.coarse_min_lambda_px {
+            Some(_) => 1,
+            None => self.pyramid_levels as usize,
+        };
+        let stages = coarse_stages + self.lambda_schedule.len();
         if self.step1_max_iterations < stages {
             return bad(
                 "step1_max_iterations",

@@ -98,17 +98,24 @@ impl Level {
             parallel: config.parallel,
             ..RenderOptions::default()
         };
+        // The camera's pixel grid set up once, shared by every feature of the level.
+        let brightness = Brightness::new(&camera).with_normalization(config.normalize);
+        let pgm = |normalize| {
+            Pgm::from_brightness(brightness.sharing_tables(), pgm_options(config, normalize))
+        };
         Ok(Self {
             renderer: Renderer::new(camera.clone(), options)?,
             frame: Frame::for_camera(&camera),
-            pgm: Pgm::new(&camera, pgm_options(config, config.normalize))?,
-            brightness: Brightness::new(&camera).with_normalization(config.normalize),
+            pgm: pgm(config.normalize)?,
             vignetting: RadialVignetting::new(&camera),
             corrected: Frame::for_camera(&camera),
             derivative: Image::new(camera.width(), camera.height()),
-            derivative_pgm: Pgm::new(&camera, pgm_options(config, false))?,
-            desired_pgm: Pgm::new(&camera, pgm_options(config, config.normalize))?,
-            desired_brightness: Brightness::new(&camera).with_normalization(config.normalize),
+            derivative_pgm: pgm(false)?,
+            desired_pgm: pgm(config.normalize)?,
+            desired_brightness: brightness
+                .sharing_tables()
+                .with_normalization(config.normalize),
+            brightness,
             support: vec![false; camera.pixel_count()],
             against: vec![0.0; camera.pixel_count()],
             against_observed: vec![false; camera.pixel_count()],
@@ -255,7 +262,8 @@ impl<'a> Servo<'a> {
     }
 
     /// The stages of a method: step 1 (coarse pyramid levels first, then the full
-    /// resolution at λ*₁, then the λ schedule), then step 2.
+    /// resolution at λ*₁, then the λ schedule; or, coarse to fine, λ*₁ and the
+    /// schedule each at its level), then step 2.
     fn stages(&self, method: Method) -> Vec<Planned> {
         let c = &self.config;
         if method == Method::Povs {
@@ -274,12 +282,29 @@ impl<'a> Servo<'a> {
             1.0
         };
         // (λ*, level) of step 1's stages.
-        let mut step1: Vec<(f32, usize)> = (1..c.pyramid_levels as usize)
-            .rev()
-            .map(|k| (c.lambda_star_step1 / (1u32 << k) as f32, k))
-            .collect();
-        step1.push((c.lambda_star_step1, 0));
-        step1.extend(c.lambda_schedule.iter().map(|&l| (l, 0)));
+        let step1: Vec<(f32, usize)> = match c.coarse_min_lambda_px {
+            None => {
+                let mut step1: Vec<(f32, usize)> = (1..c.pyramid_levels as usize)
+                    .rev()
+                    .map(|k| (c.lambda_star_step1 / (1u32 << k) as f32, k))
+                    .collect();
+                step1.push((c.lambda_star_step1, 0));
+                step1.extend(c.lambda_schedule.iter().map(|&l| (l, 0)));
+                step1
+            }
+            Some(min_lambda) => std::iter::once(c.lambda_star_step1)
+                .chain(c.lambda_schedule.iter().copied())
+                .map(|lambda| {
+                    // The coarsest level at which λ* stays at least `min_lambda` (the
+                    // full resolution if λ* itself is below it).
+                    let level = (0..c.pyramid_levels as usize)
+                        .rev()
+                        .find(|&k| lambda / (1u32 << k) as f32 >= min_lambda)
+                        .unwrap_or(0);
+                    (lambda / (1u32 << level) as f32, level)
+                })
+                .collect(),
+        };
         let n = step1.len();
         let mut planned: Vec<Planned> = step1
             .into_iter()

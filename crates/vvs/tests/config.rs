@@ -9,6 +9,7 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         robust: Some(Robust::Tukey { c: 4.685 }),
         levenberg_marquardt: Some(0.01),
         pyramid_levels: 3,
+        coarse_min_lambda_px: Some(1.5),
         lambda_schedule: vec![7.5, 3.0],
         stall_window: 0,
         pgm_recursive_from_lambda: f32::INFINITY,
@@ -57,6 +58,8 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
             "pyramid_levels",
         ),
         ("lambda_schedule = [7.5, 0.1]", "lambda_schedule"),
+        ("coarse_min_lambda_px = 0.1", "coarse_min_lambda_px"),
+        ("coarse_min_lambda_px = nan", "coarse_min_lambda_px"),
         ("stall_relative_decrease = 1.5", "stall_relative_decrease"),
         (
             "step1_max_iterations = 2\nlambda_schedule = [7.5, 3.0]",
@@ -68,6 +71,11 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
             other => panic!("{text}: {other:?}"),
         }
     }
+    // Coarse to fine places λ*₁ where it stays in range: no pyramid stage at 0.375 px.
+    VvsConfig::from_toml_str(
+        "lambda_star_step1 = 1.5\npyramid_levels = 3\ncoarse_min_lambda_px = 1.0",
+    )
+    .unwrap();
     assert!(matches!(
         VvsConfig::from_toml_str("gian = 0.2"),
         Err(VvsError::ConfigFile(_))

@@ -203,6 +203,82 @@ fn pyramid_and_lambda_schedule_run_their_stages_and_converge() {
     );
 }
 
+/// Coarse to fine (the localiser's defaults): each of step 1's stages at the coarsest
+/// level where its λ* stays at least `coarse_min_lambda_px` (λ*₁ = 15 and 7.5 at half
+/// resolution as 7.5 and 3.75, the schedule's 3 as 1.5), no pyramid stage of its own,
+/// step 2 at full resolution; the run converges as the full-resolution one does, in
+/// fewer full-resolution iterations.
+#[test]
+fn coarse_to_fine_runs_step1_at_half_resolution_and_converges() {
+    let camera = fixture();
+    let localizer = vvs::Localizer::default();
+    assert_eq!(localizer.config.coarse_min_lambda_px, Some(1.5));
+    let full = VvsConfig {
+        keep_history: true,
+        parallel: false,
+        ..localizer.config.clone()
+    };
+    let mut servo = Servo::new(&city().cloud, &camera, full.clone()).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
+    let coarse = servo.run(Method::Rule2, &desired, start).unwrap();
+    let plain = Servo::new(
+        &city().cloud,
+        &camera,
+        VvsConfig {
+            pyramid_levels: 1,
+            coarse_min_lambda_px: None,
+            ..full
+        },
+    )
+    .unwrap()
+    .run(Method::Rule2, &desired, start)
+    .unwrap();
+    // Stage starts (step, level, λ*): where the step or the level changes, or λ jumps
+    // up to a new extent.
+    let h = &coarse.history;
+    let mut starts = vec![(h[0].stage, h[0].level, h[0].lambda)];
+    for w in h.windows(2) {
+        if (w[1].stage, w[1].level) != (w[0].stage, w[0].level) || w[1].lambda > w[0].lambda + 0.5 {
+            starts.push((w[1].stage, w[1].level, w[1].lambda));
+        }
+    }
+    // λ jumps down between stages: the schedule's starts are found by their λ*.
+    let schedule: Vec<(u8, u8, f32)> = h
+        .iter()
+        .filter(|r| [7.5f32, 3.75, 1.5, 1.0].contains(&r.lambda))
+        .map(|r| (r.stage, r.level, r.lambda))
+        .collect();
+    assert_eq!(schedule.first(), Some(&(1, 1, 7.5)), "{starts:?}");
+    for stage in [(1, 1, 3.75), (1, 1, 1.5), (2, 0, 1.0)] {
+        assert!(
+            schedule.contains(&stage),
+            "{stage:?} never started: {starts:?}"
+        );
+    }
+    assert!(
+        h.iter().all(|r| (r.stage == 1) == (r.level == 1)),
+        "{starts:?}"
+    );
+    let full_resolution = |o: &vvs::Outcome| o.history.iter().filter(|r| r.level == 0).count();
+    eprintln!(
+        "coarse to fine: {:?} ({} at full resolution); full resolution: {:?}",
+        coarse.iterations,
+        full_resolution(&coarse),
+        plain.iterations
+    );
+    assert!(full_resolution(&coarse) < full_resolution(&plain));
+    for outcome in [&coarse, &plain] {
+        let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
+        assert!(
+            dt < 0.01 && dr.to_degrees() < 0.1,
+            "{:?}: {dt} m, {}°",
+            outcome.stop,
+            dr.to_degrees()
+        );
+    }
+}
+
 /// Running several methods at once (Rule1 and Rule2 sharing step 1) gives each one
 /// exactly what running it alone gives, and sequential images match parallel ones.
 #[test]

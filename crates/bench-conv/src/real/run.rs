@@ -558,12 +558,16 @@ impl Benchmark {
             _ => (&self.camera, &self.pictures[job.query]),
         };
         if job.reference {
-            // The paper's gain and no damping: small steps down to the optimum.
+            // The paper's gain, no damping and the paper's convergence thresholds:
+            // small steps down to the optimum.
+            let paper = VvsConfig::default();
             let config = VvsConfig {
                 stall_window: 0,
                 max_iterations: 400,
-                gain: 0.2,
-                levenberg_marquardt: None,
+                gain: paper.gain,
+                levenberg_marquardt: paper.levenberg_marquardt,
+                converged_translation_m: paper.converged_translation_m,
+                converged_rotation_rad: paper.converged_rotation_rad,
                 ..BenchMethod::parse("povs")?.config()
             };
             let outcome =
