@@ -17,7 +17,7 @@ pub use global::{
     GlobalConfig, PriorBox, SearchPhase, SearchProgress, SearchReport, turned,
     turned_about_optical_axis,
 };
-pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer};
+pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer, PreparedLocalizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;
 pub use servo::{MAX_SERVO_PIXELS, SERVO_BYTES_PER_PIXEL, SearchProgressFn, Servo};

@@ -159,27 +159,23 @@ impl Localizer {
         initial: Isometry3,
         progress: &mut dyn FnMut(SearchProgress),
     ) -> Result<Outcome, VvsError> {
-        let mut servo = Servo::new(cloud, camera, self.config.clone())?;
-        let prior = match &self.prior {
-            Some(prior) => Some(prior),
-            None if self.method == Method::Global => Some(&self.config.global.prior),
-            None => None,
-        };
-        match prior {
-            Some(prior) => servo.localize_in_box_with_progress(picture, initial, prior, progress),
-            None => {
-                let outcome = servo.run(self.method, picture, initial)?;
-                // Nothing seen before the first step: an input to fix, not a divergence.
-                if outcome.stop == StopReason::Diverged(Divergence::NoValidPixels)
-                    && outcome.iterations.iter().sum::<usize>() == 0
-                {
-                    return Err(VvsError::CloudNotInView {
-                        min_percent: 100.0 * self.config.min_hit_fraction,
-                    });
-                }
-                Ok(outcome)
-            }
-        }
+        self.prepare(cloud, camera)?
+            .localize_with_progress(picture, initial, progress)
+    }
+
+    /// This localiser set up for `cloud` and `camera`: its buffers (renderings,
+    /// features, pyramid levels) allocated once, for picture after picture (a robot
+    /// relocalising, a batch of photographs). Each localisation gives what
+    /// [`Localizer::localize`] gives.
+    pub fn prepare<'a>(
+        &self,
+        cloud: &'a PointCloud,
+        camera: &Camera,
+    ) -> Result<PreparedLocalizer<'a>, VvsError> {
+        Ok(PreparedLocalizer {
+            servo: Servo::new(cloud, camera, self.config.clone())?,
+            localizer: self.clone(),
+        })
     }
 
     /// Read the files and localise the picture from `initial`.
@@ -214,6 +210,61 @@ impl Localizer {
             camera,
             load_time_s,
         })
+    }
+}
+
+/// A [`Localizer`] set up for one cloud and camera ([`Localizer::prepare`]).
+#[derive(Debug)]
+pub struct PreparedLocalizer<'a> {
+    localizer: Localizer,
+    servo: Servo<'a>,
+}
+
+impl PreparedLocalizer<'_> {
+    /// Localise `picture` from `initial` (`world_from_camera`), as
+    /// [`Localizer::localize`] does.
+    pub fn localize<D: AnyImage + Clone>(
+        &mut self,
+        picture: &D,
+        initial: Isometry3,
+    ) -> Result<Outcome, VvsError> {
+        self.localize_with_progress(picture, initial, &mut |_| ())
+    }
+
+    /// [`PreparedLocalizer::localize`], calling `progress` as a global search goes on.
+    pub fn localize_with_progress<D: AnyImage + Clone>(
+        &mut self,
+        picture: &D,
+        initial: Isometry3,
+        progress: &mut dyn FnMut(SearchProgress),
+    ) -> Result<Outcome, VvsError> {
+        let Localizer {
+            config,
+            method,
+            prior,
+        } = &self.localizer;
+        let prior = match prior {
+            Some(prior) => Some(prior),
+            None if *method == Method::Global => Some(&config.global.prior),
+            None => None,
+        };
+        match prior {
+            Some(prior) => self
+                .servo
+                .localize_in_box_with_progress(picture, initial, prior, progress),
+            None => {
+                let outcome = self.servo.run(*method, picture, initial)?;
+                // Nothing seen before the first step: an input to fix, not a divergence.
+                if outcome.stop == StopReason::Diverged(Divergence::NoValidPixels)
+                    && outcome.iterations.iter().sum::<usize>() == 0
+                {
+                    return Err(VvsError::CloudNotInView {
+                        min_percent: 100.0 * config.min_hit_fraction,
+                    });
+                }
+                Ok(outcome)
+            }
+        }
     }
 }
 

@@ -1,5 +1,6 @@
 //! Convergence claims on the synthetic city.
 
+use ucm::Isometry3;
 use vvs::{Method, PgmJacobian, Servo, StopReason, VvsConfig};
 
 use crate::common::*;
@@ -276,6 +277,37 @@ fn coarse_to_fine_runs_step1_at_half_resolution_and_converges() {
             outcome.stop,
             dr.to_degrees()
         );
+    }
+}
+
+/// A localiser prepared for a cloud and camera localises picture after picture, each
+/// exactly as a localiser set up for it alone does, whatever it localised before.
+#[test]
+fn a_prepared_localizer_gives_what_a_new_one_gives() {
+    let camera = fixture();
+    let localizer = vvs::Localizer::default();
+    let mut servo = Servo::new(&city().cloud, &camera, VvsConfig::default()).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    let other_pose =
+        desired_pose() * Isometry3::from_pose_vector([4.0, 0.3, 0.0, 0.0, 0.0, 0.2]).unwrap();
+    let other = servo.render(&other_pose).unwrap();
+    let starts = [
+        (&desired, offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05])),
+        (
+            &other,
+            other_pose * Isometry3::from_pose_vector([-0.2, 0.1, 0.1, 0.0, 0.03, -0.05]).unwrap(),
+        ),
+        (&desired, offset([-0.2, 0.2, -0.1, -0.03, 0.02, 0.0])),
+    ];
+    let mut prepared = localizer.prepare(&city().cloud, &camera).unwrap();
+    for (picture, start) in starts {
+        let alone = localizer
+            .localize(&city().cloud, &camera, picture, start)
+            .unwrap();
+        let again = prepared.localize(picture, start).unwrap();
+        assert_eq!(again.world_from_camera, alone.world_from_camera);
+        assert_eq!(again.iterations, alone.iterations);
+        assert_eq!(again.cost.to_bits(), alone.cost.to_bits());
     }
 }
 
