@@ -101,7 +101,9 @@ pub struct Localizer {
     /// steps of gain 1, the paper's 20 µm are below the renderings' noise and the
     /// stall test ends every run). The same convergence domain on the synthetic city,
     /// in a third of the time (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
-    /// per-iteration history.
+    /// per-iteration history. One thread (`parallel = false`): on two cores the
+    /// renderer's parallel passes take twice the time of one thread's; set it where
+    /// many cores may repay them (the results are the same bits either way).
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2).
     pub method: Method,
@@ -126,6 +128,7 @@ impl Default for Localizer {
                 converged_translation_m: 5e-4,
                 converged_rotation_rad: 1e-4,
                 keep_history: false,
+                parallel: false,
                 ..VvsConfig::default()
             },
             method: Method::Rule2,
