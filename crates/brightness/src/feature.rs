@@ -9,14 +9,22 @@ use crate::BrightnessError;
 use crate::gradient::MaskedGradient;
 use crate::photometric;
 
-/// A camera's tables, shared by the features of that camera.
+/// A camera's tables, set up once and shared by the features of that camera.
+#[derive(Debug)]
 struct Tables {
-    grid: Arc<PixelGrid>,
-    gradient_plan: Arc<MaskedGradient>,
-    valid_runs: Arc<[[u32; 2]]>,
-    factors_u: Arc<[[f32; 6]]>,
-    factors_v: Arc<[[f32; 6]]>,
-    samples: Arc<[u32]>,
+    grid: PixelGrid,
+    gradient_plan: MaskedGradient,
+    /// `[start, end)` row-major runs of valid pixels.
+    valid_runs: Vec<[u32; 2]>,
+    /// The rows `[T_u | R_u]` and `[T_v | R_v]` of the valid pixels' factors
+    /// ([`PixelGrid::factors`]), one run after the other: what the interaction rows
+    /// read, contiguous.
+    factors_u: Vec<[f32; 6]>,
+    factors_v: Vec<[f32; 6]>,
+    width: usize,
+    height: usize,
+    /// Row-major indices of the valid pixels.
+    samples: Vec<u32>,
 }
 
 /// The picture a rendering is compared with on their common support
@@ -33,20 +41,9 @@ pub struct Against<'a> {
 /// The brightness feature of one camera, with its buffers (no allocation per image).
 #[derive(Debug, Clone)]
 pub struct Brightness {
-    /// The camera's tables, set up once and shared by the clones of a feature (a
-    /// clone allocates its own buffers only).
-    grid: Arc<PixelGrid>,
-    gradient_plan: Arc<MaskedGradient>,
-    /// `[start, end)` row-major runs of valid pixels.
-    valid_runs: Arc<[[u32; 2]]>,
-    /// The rows `[T_u | R_u]` and `[T_v | R_v]` of the valid pixels' factors
-    /// ([`PixelGrid::factors`]), one run after the other: what the interaction rows
-    /// read, contiguous.
-    factors_u: Arc<[[f32; 6]]>,
-    factors_v: Arc<[[f32; 6]]>,
-    width: usize,
-    height: usize,
-    samples: Arc<[u32]>,
+    /// The camera's tables, shared by the clones of a feature (a clone allocates its
+    /// own buffers only).
+    tables: Arc<Tables>,
     /// Whether each pixel of the last picture holds an intensity (false outside the
     /// region).
     observed: Vec<bool>,
@@ -90,86 +87,50 @@ impl Brightness {
                 _ => valid_runs.push([k, k + 1]),
             }
         }
-        let (factors_u, factors_v): (Vec<_>, Vec<_>) = samples
+        let (factors_u, factors_v) = samples
             .iter()
             .map(|&k| photometric::factor_rows(&grid.factors()[k as usize]))
             .unzip();
-        Self::with_buffers(Tables {
-            grid: Arc::new(grid),
-            gradient_plan: Arc::new(gradient_plan),
-            valid_runs: valid_runs.into(),
-            factors_u: factors_u.into(),
-            factors_v: factors_v.into(),
-            samples: samples.into(),
-        })
-        .with_size(width, height)
+        Self::with_tables(Arc::new(Tables {
+            grid,
+            gradient_plan,
+            valid_runs,
+            factors_u,
+            factors_v,
+            width,
+            height,
+            samples,
+        }))
     }
 
     /// A feature of the same camera, with buffers of its own but sharing the camera's
     /// tables (its pixel grid, gradient plan and samples): [`Brightness::new`] without
     /// setting them up again. Not normalised.
     pub fn sharing_tables(&self) -> Self {
-        Self::with_buffers(Tables {
-            grid: Arc::clone(&self.grid),
-            gradient_plan: Arc::clone(&self.gradient_plan),
-            valid_runs: Arc::clone(&self.valid_runs),
-            factors_u: Arc::clone(&self.factors_u),
-            factors_v: Arc::clone(&self.factors_v),
-            samples: Arc::clone(&self.samples),
-        })
-        .with_size(self.width, self.height)
+        Self::with_tables(Arc::clone(&self.tables))
     }
 
-    /// The feature of these tables, its buffers allocated (sized by `with_size`).
-    fn with_buffers(tables: Tables) -> Self {
-        let Tables {
-            grid,
-            gradient_plan,
-            valid_runs,
-            factors_u,
-            factors_v,
-            samples,
-        } = tables;
+    /// The feature of these tables, its buffers allocated.
+    fn with_tables(tables: Arc<Tables>) -> Self {
+        let (n, m) = (tables.width * tables.height, tables.samples.len());
         Self {
-            grid,
-            gradient_plan,
-            valid_runs,
-            factors_u,
-            factors_v,
-            width: 0,
-            height: 0,
-            samples,
-            observed: Vec::new(),
+            tables,
+            observed: vec![false; n],
             all_observed: true,
             observed_gradient: MaskedGradient::default(),
             compared: Vec::new(),
             against_observed: Vec::new(),
             compared_gradient: Vec::new(),
-            image: Vec::new(),
-            inverse_range: Vec::new(),
-            gradient: Vec::new(),
-            pixel_interaction: Vec::new(),
-            values: Vec::new(),
-            interaction: Vec::new(),
+            image: vec![0.0; n],
+            inverse_range: vec![0.0; n],
+            gradient: vec![[0.0; 2]; n],
+            pixel_interaction: vec![[0.0; 6]; n],
+            values: vec![0.0; m],
+            interaction: vec![[0.0; 6]; m],
             normalize: false,
             scale: 1.0,
             mean: 0.0,
         }
-    }
-
-    /// Size the buffers for a `width × height` camera.
-    fn with_size(mut self, width: usize, height: usize) -> Self {
-        let (n, m) = (width * height, self.samples.len());
-        self.width = width;
-        self.height = height;
-        self.observed = vec![false; n];
-        self.image = vec![0.0; n];
-        self.inverse_range = vec![0.0; n];
-        self.gradient = vec![[0.0; 2]; n];
-        self.pixel_interaction = vec![[0.0; 6]; n];
-        self.values = vec![0.0; m];
-        self.interaction = vec![[0.0; 6]; m];
-        self
     }
 
     /// Centre and normalise the brightness (zero mean, unit norm over the observed
@@ -188,7 +149,7 @@ impl Brightness {
     /// `1/ρ = 0`.
     pub fn compute(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
         self.compute_pixels(picture)?;
-        for (s, &k) in self.samples.iter().enumerate() {
+        for (s, &k) in self.tables.samples.iter().enumerate() {
             self.values[s] = self.image[k as usize];
             self.interaction[s] = self.pixel_interaction[k as usize];
         }
@@ -201,12 +162,14 @@ impl Brightness {
     /// reads. [`Brightness::values`] and [`Brightness::interaction`] keep what the
     /// last [`Brightness::compute`] gave.
     pub fn compute_pixels(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
-        if picture.width() as usize != self.width || picture.height() as usize != self.height {
+        if picture.width() as usize != self.tables.width
+            || picture.height() as usize != self.tables.height
+        {
             return Err(BrightnessError::ImageSize {
                 got_width: picture.width(),
                 got_height: picture.height(),
-                width: self.width as u32,
-                height: self.height as u32,
+                width: self.tables.width as u32,
+                height: self.tables.height as u32,
             });
         }
         // Compiled for the widest instruction set found at run time, so that the plain
@@ -237,7 +200,7 @@ impl Brightness {
         against: Against<'_>,
     ) -> Result<(), BrightnessError> {
         self.compute_pixels_against(rendering, against)?;
-        for (s, &k) in self.samples.iter().enumerate() {
+        for (s, &k) in self.tables.samples.iter().enumerate() {
             self.values[s] = self.image[k as usize];
             self.interaction[s] = self.pixel_interaction[k as usize];
         }
@@ -251,7 +214,7 @@ impl Brightness {
         rendering: &impl AnyImage,
         against: Against<'_>,
     ) -> Result<(), BrightnessError> {
-        let n = self.width * self.height;
+        let n = self.tables.width * self.tables.height;
         for (what, got) in [
             ("picture compared against", against.intensity.len()),
             ("its observed pixels", against.observed.len()),
@@ -272,8 +235,12 @@ impl Brightness {
     /// The interaction rows of [`Brightness::compute_against`], after
     /// [`Brightness::compute_pixels`] of the rendering on the compared pixels.
     fn edge_of_support(&mut self, against: Against<'_>) {
-        let (w, h, n) = (self.width, self.height, self.width * self.height);
-        let valid = self.grid.valid();
+        let (w, h, n) = (
+            self.tables.width,
+            self.tables.height,
+            self.tables.width * self.tables.height,
+        );
+        let valid = self.tables.grid.valid();
         self.compared.clear();
         self.compared
             .extend(self.observed.iter().map(|&o| if o { 1.0 } else { 0.0 }));
@@ -325,7 +292,7 @@ impl Brightness {
     /// The body of [`Brightness::compute_pixels`], once the size is checked.
     #[inline(always)]
     fn pixels(&mut self, picture: &impl AnyImage) {
-        let valid = self.grid.valid();
+        let valid = self.tables.grid.valid();
         picture
             .inverse_range(&mut self.inverse_range)
             .expect("picture size checked above");
@@ -333,7 +300,7 @@ impl Brightness {
         // there; the inverse ranges are zeroed between the valid runs.
         let mut end = 0;
         let mut all_observed = true;
-        for &[start, stop] in self.valid_runs.iter() {
+        for &[start, stop] in self.tables.valid_runs.iter() {
             let run = start as usize..stop as usize;
             self.inverse_range[end..run.start].fill(0.0);
             picture.observed_intensity(run.clone(), &mut self.image[run.clone()]);
@@ -350,21 +317,23 @@ impl Brightness {
             return;
         }
         if self.normalize {
-            let m = self.samples.len().max(1) as f64;
+            let m = self.tables.samples.len().max(1) as f64;
             let mean = self
+                .tables
                 .samples
                 .iter()
                 .map(|&k| f64::from(self.image[k as usize]))
                 .sum::<f64>()
                 / m;
             let norm = self
+                .tables
                 .samples
                 .iter()
                 .map(|&k| (f64::from(self.image[k as usize]) - mean).powi(2))
                 .sum::<f64>()
                 .sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
-            for &k in self.samples.iter() {
+            for &k in self.tables.samples.iter() {
                 let k = k as usize;
                 self.image[k] = ((f64::from(self.image[k]) - mean) * scale) as f32;
             }
@@ -373,7 +342,8 @@ impl Brightness {
         }
         // The gradient and the interaction rows are zero outside the region from the
         // start, and only the region is written.
-        self.gradient_plan
+        self.tables
+            .gradient_plan
             .compute(&self.image, valid, &mut self.gradient);
         self.rows();
     }
@@ -384,7 +354,12 @@ impl Brightness {
     #[inline(always)]
     fn partly_observed(&mut self) {
         if self.normalize {
-            let observed = || self.samples.iter().filter(|&&k| self.observed[k as usize]);
+            let observed = || {
+                self.tables
+                    .samples
+                    .iter()
+                    .filter(|&&k| self.observed[k as usize])
+            };
             let count = observed().count().max(1) as f64;
             let mean = observed()
                 .map(|&k| f64::from(self.image[k as usize]))
@@ -395,7 +370,7 @@ impl Brightness {
                 .sum::<f64>()
                 .sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
-            for &k in self.samples.iter() {
+            for &k in self.tables.samples.iter() {
                 let k = k as usize;
                 self.image[k] = if self.observed[k] {
                     ((f64::from(self.image[k]) - mean) * scale) as f32
@@ -407,10 +382,10 @@ impl Brightness {
             self.mean = mean;
         }
         self.observed_gradient
-            .rebuild(&self.observed, self.width, self.height);
+            .rebuild(&self.observed, self.tables.width, self.tables.height);
         self.observed_gradient
             .compute(&self.image, &self.observed, &mut self.gradient);
-        for &k in self.samples.iter() {
+        for &k in self.tables.samples.iter() {
             if !self.observed[k as usize] {
                 self.gradient[k as usize] = [0.0; 2];
             }
@@ -423,11 +398,11 @@ impl Brightness {
     #[inline(always)]
     fn rows(&mut self) {
         let mut first = 0;
-        for &[start, end] in self.valid_runs.iter() {
+        for &[start, end] in self.tables.valid_runs.iter() {
             let (run, n) = (start as usize..end as usize, (end - start) as usize);
             photometric::rows(photometric::Run {
-                u: &self.factors_u[first..first + n],
-                v: &self.factors_v[first..first + n],
+                u: &self.tables.factors_u[first..first + n],
+                v: &self.tables.factors_v[first..first + n],
                 gradient: &self.gradient[run.clone()],
                 inverse_range: &self.inverse_range[run.clone()],
                 out: &mut self.pixel_interaction[run],
@@ -449,7 +424,7 @@ impl Brightness {
 
     /// Row-major pixel indices of the samples (the valid pixels).
     pub fn samples(&self) -> &[u32] {
-        &self.samples
+        &self.tables.samples
     }
 
     /// Intensity of every sample (after normalisation if enabled).
@@ -485,22 +460,22 @@ impl Brightness {
     /// Validity of every pixel (the camera's region minus pixels the model cannot
     /// invert).
     pub fn valid(&self) -> &[bool] {
-        self.grid.valid()
+        self.tables.grid.valid()
     }
 
     /// The camera's pixel grid.
     pub fn grid(&self) -> &PixelGrid {
-        &self.grid
+        &self.tables.grid
     }
 
     /// Image width, pixels.
     pub fn width(&self) -> usize {
-        self.width
+        self.tables.width
     }
 
     /// Image height, pixels.
     pub fn height(&self) -> usize {
-        self.height
+        self.tables.height
     }
 
     /// The factor applied by normalisation to the last image (1 without).

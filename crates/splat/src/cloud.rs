@@ -224,6 +224,7 @@ impl PointCloud {
         // in f64), in that order.
         let cell_m = f64::from(cell_size_m);
         let step_m = cell_m / STEPS;
+        let cell_of = |o: &(i64, i64, i64, u64, u32)| (o.0, o.1, o.2);
         let corner_of =
             |o: &(i64, i64, i64, u64, u32)| DVec3::new(o.0 as f64, o.1 as f64, o.2 as f64) * cell_m;
         let points: Vec<PackedPoint> = order
@@ -248,10 +249,7 @@ impl PointCloud {
         // The cells: runs of one key.
         let starts: Vec<usize> = (0..n)
             .into_par_iter()
-            .filter(|&i| {
-                let cell = |o: &(i64, i64, i64, u64, u32)| (o.0, o.1, o.2);
-                i == 0 || cell(&order[i]) != cell(&order[i - 1])
-            })
+            .filter(|&i| i == 0 || cell_of(&order[i]) != cell_of(&order[i - 1]))
             .collect();
         let cells_and_bounds: Vec<(Cell, DVec3, DVec3)> = starts
             .par_iter()

@@ -11,7 +11,8 @@ use splat::PointCloud;
 /// the world, with random intensities: each decodes within half a step (in every cell
 /// size) of its position, and its intensity within half of 1/65 535; every cell's
 /// sphere holds its points, the cloud's origin near them or 580 km away (where the
-/// centres' `f32` rounding exceeds a millimetre); its bounds are the decoded points'. Cells under a millimetre are refused.
+/// centres' `f32` rounding exceeds a millimetre); its bounds are the decoded points'.
+/// Cells under a millimetre are refused.
 #[test]
 fn points_decode_to_half_a_step() {
     let origin = DVec3::new(651_234.5, 6_862_345.25, 40.0);

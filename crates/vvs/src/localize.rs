@@ -175,9 +175,16 @@ impl Localizer {
         cloud: &'a PointCloud,
         camera: &Camera,
     ) -> Result<PreparedLocalizer<'a>, VvsError> {
+        // `Method::Global` without a box of its own searches the configuration's.
+        let prior = match &self.prior {
+            Some(prior) => Some(prior.clone()),
+            None if self.method == Method::Global => Some(self.config.global.prior.clone()),
+            None => None,
+        };
         Ok(PreparedLocalizer {
             servo: Servo::new(cloud, camera, self.config.clone())?,
-            localizer: self.clone(),
+            method: self.method,
+            prior,
         })
     }
 
@@ -219,8 +226,12 @@ impl Localizer {
 /// A [`Localizer`] set up for one cloud and camera ([`Localizer::prepare`]).
 #[derive(Debug)]
 pub struct PreparedLocalizer<'a> {
-    localizer: Localizer,
+    /// The optimiser, with the localiser's settings.
     servo: Servo<'a>,
+    /// The local method, run without a prior box.
+    method: Method,
+    /// The box of the global search, if any.
+    prior: Option<PriorBox>,
 }
 
 impl PreparedLocalizer<'_> {
@@ -241,28 +252,18 @@ impl PreparedLocalizer<'_> {
         initial: Isometry3,
         progress: &mut dyn FnMut(SearchProgress),
     ) -> Result<Outcome, VvsError> {
-        let Localizer {
-            config,
-            method,
-            prior,
-        } = &self.localizer;
-        let prior = match prior {
-            Some(prior) => Some(prior),
-            None if *method == Method::Global => Some(&config.global.prior),
-            None => None,
-        };
-        match prior {
+        match &self.prior {
             Some(prior) => self
                 .servo
                 .localize_in_box_with_progress(picture, initial, prior, progress),
             None => {
-                let outcome = self.servo.run(*method, picture, initial)?;
+                let outcome = self.servo.run(self.method, picture, initial)?;
                 // Nothing seen before the first step: an input to fix, not a divergence.
                 if outcome.stop == StopReason::Diverged(Divergence::NoValidPixels)
                     && outcome.iterations.iter().sum::<usize>() == 0
                 {
                     return Err(VvsError::CloudNotInView {
-                        min_percent: 100.0 * config.min_hit_fraction,
+                        min_percent: 100.0 * self.servo.config().min_hit_fraction,
                     });
                 }
                 Ok(outcome)
