@@ -102,7 +102,7 @@ pub struct Localizer {
     /// stall test ends every run). The same convergence domain on the synthetic city,
     /// in a third of the time (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`): on two cores the
-    /// renderer's parallel passes take twice the time of one thread's; set it where
+    /// renderer's parallel passes take more than twice one thread's time; set it where
     /// many cores may repay them (the results are the same bits either way).
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2).
