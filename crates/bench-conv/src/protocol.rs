@@ -500,13 +500,10 @@ impl Protocol {
                 });
             } else {
                 for &j in &self.jacobians {
-                    let mut config = VvsConfig {
+                    let config = VvsConfig {
                         jacobian: j,
                         ..base.clone()
                     };
-                    if method == Method::Global {
-                        config.global.prior = self.prior_box();
-                    }
                     out.push(MethodConfig {
                         name: format!("{}/{}", method.name(), j.name()),
                         method,
@@ -521,9 +518,6 @@ impl Protocol {
                     .with_overrides(&v.vvs)
                     .with_context(|| format!("variant {}", v.name))?;
                 config.jacobian = v.jacobian;
-                if v.method == Method::Global {
-                    config.global.prior = self.prior_box();
-                }
                 out.push(MethodConfig {
                     name: v.name.clone(),
                     method: v.method,

@@ -253,17 +253,7 @@ impl Shared<'_> {
                                 parallel: parallel_images,
                                 ..first.config.clone()
                             };
-                            let mut servo = Servo::new(cloud, camera, config)?;
-                            // A global search can take seconds: its phases beside the bar.
-                            let bar = std::sync::Arc::clone(&self.bar);
-                            servo.set_search_progress(Some(Box::new(move |p| {
-                                bar.note(&format!(
-                                    "global search: {} {}/{}",
-                                    p.phase.name(),
-                                    p.done,
-                                    p.total
-                                ));
-                            })));
+                            let servo = Servo::new(cloud, camera, config)?;
                             servos.push((job[0].method, servo));
                             servos.len() - 1
                         }
@@ -275,8 +265,26 @@ impl Shared<'_> {
                     let initial_pose = protocol.initial_pose(desired, initial, offset_scale)?;
                     let job_methods: Vec<Method> =
                         job.iter().map(|r| methods[r.method].method).collect();
-                    let outcomes =
-                        servo.run_methods(&job_methods, &desired_images[desired], initial_pose)?;
+                    let desired_image = &desired_images[desired];
+                    let outcomes = if job_methods == [Method::Global] {
+                        // The protocol's box; a search can take seconds: its phases
+                        // beside the bar.
+                        vec![servo.localize_in_box_with_progress(
+                            desired_image,
+                            initial_pose,
+                            &protocol.prior_box(),
+                            &mut |p| {
+                                self.bar.note(&format!(
+                                    "global search: {} {}/{}",
+                                    p.phase.name(),
+                                    p.done,
+                                    p.total
+                                ))
+                            },
+                        )?]
+                    } else {
+                        servo.run_methods(&job_methods, desired_image, initial_pose)?
+                    };
                     let mut records = Vec::with_capacity(job.len());
                     for (spec, outcome) in job.iter().zip(outcomes) {
                         let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose);

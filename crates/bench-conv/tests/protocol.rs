@@ -104,7 +104,6 @@ fn fixture_protocols_parse_and_keep_every_pose_in_the_street() {
     assert_eq!(wide.prior_box().rotation_deg[2], 180.0);
     let configs = wide.method_configs(false).unwrap();
     assert_eq!(configs[0].config.global.heading_spacing_deg, Some(15.0));
-    assert_eq!(configs[0].config.global.prior, wide.prior_box());
     let headings: Vec<f64> = (0..16)
         .map(|i| wide.offset(0, i, 1.0)[5].to_degrees())
         .collect();

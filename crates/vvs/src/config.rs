@@ -30,13 +30,24 @@ pub enum Method {
     /// Beyond the paper: global localisation inside a prior region
     /// ([`crate::global`], settings in [`VvsConfig::global`]): a low-resolution search
     /// over a grid of the region, then [`crate::GlobalConfig::refine_method`] from the
-    /// best [`crate::GlobalConfig::refined`] low-resolution descents.
+    /// best [`crate::GlobalConfig::refined`] low-resolution descents. It takes a prior
+    /// box, given where it is run ([`crate::Localizer::prior`],
+    /// [`crate::Servo::localize_in_box`]); the calls of the local methods refuse it.
     Global,
 }
 
 impl Method {
-    /// The paper's methods, in its order of presentation.
-    pub const ALL: [Method; 4] = [Method::Povs, Method::Rule0, Method::Rule1, Method::Rule2];
+    /// The paper's methods, in its order of presentation: the local ones.
+    pub const PAPER: [Method; 4] = [Method::Povs, Method::Rule0, Method::Rule1, Method::Rule2];
+
+    /// Every method: the paper's, then [`Method::Global`].
+    pub const ALL: [Method; 5] = [
+        Method::Povs,
+        Method::Rule0,
+        Method::Rule1,
+        Method::Rule2,
+        Method::Global,
+    ];
 
     /// Short name (`povs`, `rule0`, …).
     pub fn name(self) -> &'static str {
@@ -63,7 +74,6 @@ impl std::str::FromStr for Method {
     fn from_str(text: &str) -> Result<Self, VvsError> {
         Method::ALL
             .into_iter()
-            .chain([Method::Global])
             .find(|m| m.name().eq_ignore_ascii_case(text.trim()))
             .ok_or_else(|| VvsError::UnknownName {
                 what: "method",

@@ -50,6 +50,13 @@ pub enum VvsError {
     /// The initial pose is not finite.
     #[error("initial pose is not finite")]
     NonFinitePose,
+    /// [`crate::Method::Global`] asked of a call that runs local methods: the global
+    /// search takes a prior box.
+    #[error(
+        "the global method searches a prior box: give one (Localizer::prior, \
+         Servo::localize_in_box)"
+    )]
+    GlobalWithoutPrior,
     /// At the initial pose the camera sees too little of the cloud to start (a pose far
     /// from the cloud, looking away from it, or a camera that sees nothing).
     #[error(

@@ -6,10 +6,10 @@ mod error;
 pub mod global;
 pub mod localize;
 mod outcome;
-pub mod photometric;
 mod servo;
 pub mod solve;
 pub mod track;
+pub mod vignetting;
 
 pub use config::{MAX_ITERATIONS, MAX_PGM_STRIDE, Method, Robust, Support, VvsConfig};
 pub use error::VvsError;
@@ -20,5 +20,5 @@ pub use global::{
 pub use localize::{CameraFile, LocalizeFiles, Localized, Localizer, PreparedLocalizer};
 pub use outcome::{Divergence, IterationRecord, Outcome, StopReason};
 pub use pgm::PgmJacobian;
-pub use servo::{MAX_SERVO_PIXELS, SERVO_BYTES_PER_PIXEL, SearchProgressFn, Servo};
+pub use servo::{MAX_SERVO_PIXELS, SERVO_BYTES_PER_PIXEL, Servo};
 pub use track::{Prediction, Recovery, TrackReport, TrackedFrame, Tracker};

@@ -105,11 +105,13 @@ pub struct Localizer {
     /// renderer's parallel passes take more than twice one thread's time; set it where
     /// many cores may repay them (the results are the same bits either way).
     pub config: VvsConfig,
-    /// The local method run without a prior box (default: Rule2).
+    /// The local method run without a prior box (default: Rule2; [`Method::Global`]
+    /// asks for the prior box below, [`VvsError::GlobalWithoutPrior`] without one).
     pub method: Method,
-    /// With a prior box, the global search of [`crate::global`] inside it around the
-    /// initial pose (then `method` is ignored; the search refines with
-    /// `config.global.refine_method`).
+    /// The prior box: with one, the global search of [`crate::global`] inside it
+    /// around the initial pose (then `method` is ignored; the search refines with
+    /// `config.global.refine_method`). The one place a localisation's box is given,
+    /// like its initial pose: no configuration holds one.
     pub prior: Option<PriorBox>,
 }
 
@@ -175,16 +177,13 @@ impl Localizer {
         cloud: &'a PointCloud,
         camera: &Camera,
     ) -> Result<PreparedLocalizer<'a>, VvsError> {
-        // `Method::Global` without a box of its own searches the configuration's.
-        let prior = match &self.prior {
-            Some(prior) => Some(prior.clone()),
-            None if self.method == Method::Global => Some(self.config.global.prior.clone()),
-            None => None,
-        };
+        if self.prior.is_none() && self.method == Method::Global {
+            return Err(VvsError::GlobalWithoutPrior);
+        }
         Ok(PreparedLocalizer {
             servo: Servo::new(cloud, camera, self.config.clone())?,
             method: self.method,
-            prior,
+            prior: self.prior.clone(),
         })
     }
 

@@ -178,11 +178,15 @@ pub struct Tracker<'a> {
 
 impl<'a> Tracker<'a> {
     /// A tracker aligning with `method` through `servo`, starting at `initial`
-    /// (`world_from_camera` of the first frame, roughly). [`Method::Global`] is
-    /// allowed (each frame then searches its prior box around the previous estimate).
+    /// (`world_from_camera` of the first frame, roughly). `method` is a local one
+    /// ([`Method::Global`]: [`VvsError::GlobalWithoutPrior`]; a tracker searches a box
+    /// only to recover, [`Tracker::with_recovery`]).
     pub fn new(servo: Servo<'a>, method: Method, initial: Isometry3) -> Result<Self, VvsError> {
         if !initial.is_finite() {
             return Err(VvsError::NonFinitePose);
+        }
+        if method == Method::Global {
+            return Err(VvsError::GlobalWithoutPrior);
         }
         Ok(Self {
             servo,

@@ -12,7 +12,7 @@ fn every_method_converges_from_a_small_offset() {
     let mut servo = Servo::new(&city().cloud, &camera, VvsConfig::default()).unwrap();
     let desired = servo.render(&desired_pose()).unwrap();
     let start = offset([0.04, -0.03, 0.02, 0.01, -0.01, 0.02]);
-    for method in Method::ALL {
+    for method in Method::PAPER {
         let outcome = servo.run(method, &desired, start).unwrap();
         let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
         eprintln!(

@@ -122,13 +122,18 @@ fn global_settings_are_validated() {
     assert!(config.validate().is_err());
     // A lying box and a λ*₁ too small for the search's resolution: fine for Rule2,
     // refused by the search.
-    let mut config = VvsConfig::default();
-    config.global.prior.rotation_deg = [f64::NAN, 0.0, 0.0];
-    config.lambda_star_step1 = 1.0;
+    let config = VvsConfig {
+        lambda_star_step1: 1.0,
+        ..VvsConfig::default()
+    };
     config.validate().unwrap();
     let (mut servo, desired) = servo_with(config);
+    let lying = PriorBox {
+        translation_m: [1.0; 3],
+        rotation_deg: [f64::NAN, 0.0, 0.0],
+    };
     assert!(matches!(
-        servo.run(Method::Global, &desired, desired_pose()),
+        servo.localize_in_box(&desired, desired_pose(), &lying),
         Err(vvs::VvsError::Config { .. })
     ));
     let fine = PriorBox {
@@ -155,7 +160,9 @@ fn servo_with(config: VvsConfig) -> (Servo<'static>, frame::Frame) {
 
 fn localize(r: [f64; 6]) -> (f64, f64, vvs::Outcome) {
     let (mut servo, desired) = servo_with(VvsConfig::default());
-    let outcome = servo.run(Method::Global, &desired, offset(r)).unwrap();
+    let outcome = servo
+        .localize_in_box(&desired, offset(r), &PriorBox::default())
+        .unwrap();
     let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
     eprintln!(
         "{r:?}: {:?}, {dt:.5} m, {:.4}°, {:?}",
@@ -187,31 +194,51 @@ fn global_converges_from_the_corner_of_the_box() {
     );
 }
 
-/// With several methods, the global search's outcome is the one it gives alone, and
-/// the others are unchanged by its company.
+/// The global search is run where its box is given, once: the calls of the local
+/// methods refuse it with a typed error, and so does a localiser without a box; a
+/// localiser with one gives what the search gives.
 #[test]
-fn global_beside_other_methods_is_what_it_is_alone() {
-    let mut config = VvsConfig::default();
-    config.global.prior = PriorBox {
+fn the_global_method_runs_only_with_a_box() {
+    let prior = PriorBox {
         translation_m: [1.0, 0.5, 0.3],
         rotation_deg: [2.0; 3],
     };
-    let (mut servo, desired) = servo_with(config);
+    let (mut servo, desired) = servo_with(VvsConfig::default());
     let start = offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]);
-    let methods = [Method::Rule2, Method::Global, Method::Povs, Method::Rule1];
-    let together = servo.run_methods(&methods, &desired, start).unwrap();
-    for (method, outcome) in methods.iter().zip(&together) {
-        let alone = servo.run(*method, &desired, start).unwrap();
-        assert_eq!(
-            outcome.world_from_camera, alone.world_from_camera,
-            "{method:?}"
-        );
-        assert_eq!(
-            (outcome.stop, outcome.iterations),
-            (alone.stop, alone.iterations)
-        );
-        assert_eq!(outcome.search.is_some(), *method == Method::Global);
-    }
+    assert!(matches!(
+        servo.run(Method::Global, &desired, start),
+        Err(vvs::VvsError::GlobalWithoutPrior)
+    ));
+    assert!(matches!(
+        servo.run_methods(&[Method::Rule2, Method::Global], &desired, start),
+        Err(vvs::VvsError::GlobalWithoutPrior)
+    ));
+    let blind = vvs::Localizer {
+        config: VvsConfig {
+            keep_history: false,
+            ..VvsConfig::default()
+        },
+        method: Method::Global,
+        prior: None,
+    };
+    assert!(matches!(
+        blind.localize(&city().cloud, &fixture(), &desired, start),
+        Err(vvs::VvsError::GlobalWithoutPrior)
+    ));
+    let boxed = vvs::Localizer {
+        prior: Some(prior.clone()),
+        ..blind
+    };
+    let outcome = boxed
+        .localize(&city().cloud, &fixture(), &desired, start)
+        .unwrap();
+    let alone = servo.localize_in_box(&desired, start, &prior).unwrap();
+    assert_eq!(outcome.world_from_camera, alone.world_from_camera);
+    assert_eq!(
+        (outcome.stop, outcome.iterations),
+        (alone.stop, alone.iterations)
+    );
+    assert!(outcome.search.is_some());
 }
 
 /// A search tells where it stands: its phases in order, each counted up to its total
@@ -249,28 +276,6 @@ fn global_reports_its_progress_phase_by_phase() {
         at += of_phase.len();
     }
     assert_eq!(at, events.len(), "events after the refinements");
-    // The same events from a callback set on the servo, for Method::Global among
-    // run_methods' methods; none once it is unset.
-    let config = VvsConfig {
-        global: vvs::GlobalConfig {
-            prior: prior.clone(),
-            ..VvsConfig::default().global
-        },
-        keep_history: false,
-        ..VvsConfig::default()
-    };
-    let mut servo = Servo::new(&city().cloud, &fixture(), config).unwrap();
-    let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-    let sink = std::sync::Arc::clone(&seen);
-    servo.set_search_progress(Some(Box::new(move |p| sink.lock().unwrap().push(p))));
-    let together = servo
-        .run_methods(&[Method::Global, Method::Rule2], &desired, start)
-        .unwrap();
-    assert_eq!(together[0].world_from_camera, alone.world_from_camera);
-    assert_eq!(*seen.lock().unwrap(), events);
-    servo.set_search_progress(None);
-    servo.localize_in_box(&desired, start, &prior).unwrap();
-    assert_eq!(seen.lock().unwrap().len(), events.len());
 }
 
 /// From inside the box, off every grid node (the truth is not at a corner).

@@ -104,7 +104,7 @@ fn the_global_search_on_the_common_support_finds_the_pose_in_a_cloud_with_holes(
     };
     let outcome = Servo::new(&holed, &camera, config)
         .unwrap()
-        .run(Method::Global, &desired, start)
+        .localize_in_box(&desired, start, &vvs::PriorBox::default())
         .unwrap();
     let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
     assert!(

@@ -157,6 +157,11 @@ fn lost_tracks_and_bad_input() {
         Tracker::new(servo, Method::Rule2, nan),
         Err(VvsError::NonFinitePose)
     ));
+    let servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    assert!(matches!(
+        Tracker::new(servo, Method::Global, truth[0]),
+        Err(VvsError::GlobalWithoutPrior)
+    ));
 }
 
 /// The predictions extrapolate the last two estimates: the last one itself, the whole

@@ -4,7 +4,7 @@
 use frame::{Frame, Image};
 use pgm::{Pgm, PgmOptions};
 use ucm::Isometry3;
-use vvs::photometric::RadialVignetting;
+use vvs::vignetting::RadialVignetting;
 use vvs::{Method, Servo, VvsConfig};
 use world::Acquisition;
 

@@ -15,7 +15,7 @@
 //! the picture, so the columns of `c` are the feature of `ρ^{2k} I` (centred and scaled
 //! like the picture when the brightness is normalised, the dependence of the mean and
 //! the norm on `c` neglected as for the pose); they are checked against finite
-//! differences in `tests/photometric.rs`.
+//! differences in `tests/vignetting.rs`.
 
 use frame::{Frame, Image, PixelStatus};
 use ucm::{Camera, ValidRegion};

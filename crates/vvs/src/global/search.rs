@@ -1,0 +1,543 @@
+//! The global search of [`crate::global`], phase by phase: the orientations' desired
+//! PGMs, the screening of every node, the low-resolution descents, the full-resolution
+//! refinements. Its buffers are its own ([`Orientations`]), built for each search.
+
+use std::time::Instant;
+
+use frame::{AnyImage, Image, PixelStatus, Restricted};
+use glam::DVec3;
+use ucm::Isometry3;
+
+use super::turn::clear_of_missing;
+use super::{
+    BOX_MARGIN_DEG, GlobalConfig, MAX_CANDIDATES, PriorBox, SearchPhase, SearchProgress,
+    SearchReport, turned, turned_about_optical_axis,
+};
+use crate::servo::{Level, Planned, Stage, outside};
+use crate::{Outcome, Servo, StopReason, Support, VvsError};
+
+/// A candidate: its score, its node and its orientation (indices).
+type Candidate = (f64, usize, usize);
+
+/// The desired picture as every orientation of the search sees it: at each node the
+/// rendering is compared with each (a central camera turned about its centre sees the
+/// same rays, so a node is rendered once whatever its orientation).
+#[derive(Debug, Default)]
+struct Orientations {
+    /// The desired PGMs, one after the other (without the common support).
+    desired: Vec<f32>,
+    /// The samples compared (1) or not (0), one after the other, for the orientations
+    /// that compare only some of them (a tilt: `masked`).
+    weights: Vec<f32>,
+    /// Per orientation: whether only some samples are compared (a tilt).
+    masked: Vec<bool>,
+    /// With [`Support::Common`]: the desired picture turned back by each orientation
+    /// (its PGM is taken on each node's common support).
+    pictures: Vec<Image>,
+    /// Per orientation, the screening's costs at the last node scored: one minus the
+    /// PGMs' correlation (on the common support) or their mean squared difference.
+    costs: Vec<f64>,
+    /// With [`Support::Common`]: per orientation, the second screening score (the
+    /// PGMs' mean squared difference over the compared samples, divided by the
+    /// fraction of the picture compared).
+    squared: Vec<f64>,
+    /// A copy of the rendering's PGM while the desired one is taken.
+    scratch: Vec<f32>,
+}
+
+impl<'a> Servo<'a> {
+    /// Global localisation (beyond the paper, [`crate::global`]): the pose at which the
+    /// cloud looks like `desired`, searched for in the `prior` region around `initial`
+    /// (`world_from_camera`) with the settings of [`crate::VvsConfig::global`].
+    /// [`crate::Localizer`] runs it when given a prior box.
+    pub fn localize_in_box<D: AnyImage + Clone>(
+        &mut self,
+        desired: &D,
+        initial: Isometry3,
+        prior: &PriorBox,
+    ) -> Result<Outcome, VvsError> {
+        self.localize_in_box_with_progress(desired, initial, prior, &mut |_| ())
+    }
+
+    /// [`Servo::localize_in_box`], calling `progress` after each node screened, each
+    /// descent and each refinement (a search in a large box runs for seconds).
+    pub fn localize_in_box_with_progress<D: AnyImage + Clone>(
+        &mut self,
+        desired: &D,
+        initial: Isometry3,
+        prior: &PriorBox,
+        progress: &mut dyn FnMut(SearchProgress),
+    ) -> Result<Outcome, VvsError> {
+        let mut report = |phase, done, total| {
+            progress(SearchProgress { phase, done, total });
+        };
+        self.check_inputs(desired, &initial)?;
+        let settings = self.config.global.clone();
+        let nodes = prior.grid(settings.grid_spacing_m)?;
+        let factor = settings.search_downsampling;
+        let lambda = self.config.lambda_star_step1 / factor as f32;
+        if !pgm::LAMBDA_RANGE.contains(&lambda) {
+            return Err(VvsError::Config {
+                name: "global.search_downsampling",
+                message: format!(
+                    "λ*₁ at the search's resolution would be {lambda} px, outside [0.5, 40]"
+                ),
+            });
+        }
+        let started = Instant::now();
+        let search = self.search_level()?;
+        let desired_small = if factor == 1 {
+            desired.clone()
+        } else {
+            desired.downsampled(factor, &self.levels[search].camera)?
+        };
+        // `[θwX, θwY, θwZ]` of each orientation, radians (tilts and heading).
+        let (angles, mut orientations) = self.orientations(
+            search,
+            &desired_small,
+            prior,
+            &settings,
+            nodes.len(),
+            lambda,
+        )?;
+
+        // Screening: the cost of every node at low resolution, at every orientation.
+        let node_pose = |index: usize, orientation: usize| {
+            let position = initial * Isometry3::from_translation(DVec3::from_array(nodes[index]));
+            let [x, y, h] = angles[orientation];
+            match Isometry3::from_pose_vector([0.0, 0.0, 0.0, x, y, h]) {
+                Ok(turn) if [x, y, h] != [0.0; 3] => position * turn,
+                _ => position,
+            }
+        };
+        let common = self.config.support == Support::Common;
+        let mut screened: Vec<Candidate> = Vec::with_capacity(nodes.len() * angles.len());
+        let mut squared: Vec<Candidate> = Vec::new();
+        for index in 0..nodes.len() {
+            self.search_cost(search, &node_pose(index, 0), lambda, &mut orientations)?;
+            for (orientation, &cost) in orientations.costs.iter().enumerate() {
+                if cost.is_finite() {
+                    screened.push((cost, index, orientation));
+                }
+                if common && orientations.squared[orientation].is_finite() {
+                    squared.push((orientations.squared[orientation], index, orientation));
+                }
+            }
+            report(SearchPhase::Screening, index + 1, nodes.len());
+        }
+        let screened = select(screened, squared, common, settings.screened);
+        let screening_s = started.elapsed().as_secs_f64();
+
+        // Descents of the best, at low resolution.
+        let planned = Planned {
+            stage: Stage::Pgm {
+                lambda_star: lambda,
+                lambda_start: lambda,
+                optimise_lambda: true,
+            },
+            step: 1,
+            level: search,
+            cap: settings.descent_iterations,
+            last_of_step: true,
+            stall_window: self.config.stall_window,
+        };
+        let identity = angles.iter().position(|o| *o == [0.0; 3]);
+        let mut descended: Vec<(f64, (usize, usize), Isometry3)> =
+            Vec::with_capacity(screened.len());
+        let mut descent_iterations = 0;
+        let mut history = Vec::new();
+        for (done, &(_, index, orientation)) in screened.iter().enumerate() {
+            report(SearchPhase::Descents, done, screened.len());
+            let mut pose = node_pose(index, orientation);
+            history.clear();
+            let mut coefficients = self.vignetting_start;
+            let result = self.run_stage(
+                planned,
+                settings.descent_iterations,
+                &desired_small,
+                &mut pose,
+                &mut coefficients,
+                &mut history,
+            )?;
+            descent_iterations += result.iterations;
+            // On the common support the descents are ranked by the screening's score
+            // at their end (the unturned picture), not by their costs: those compare
+            // pictures normalised over supports of different shapes.
+            let rank = match (common, identity) {
+                (true, Some(identity)) => {
+                    self.search_cost(search, &pose, lambda, &mut orientations)?;
+                    orientations.costs[identity]
+                }
+                _ => result.cost,
+            };
+            // A descent that left the box (grown by a grid spacing and a few degrees)
+            // found something else than the truth the box holds.
+            let in_box = prior.holds(&initial, &pose, settings.grid_spacing_m, BOX_MARGIN_DEG);
+            if !matches!(result.stop, StopReason::Diverged(_)) && rank.is_finite() && in_box {
+                descended.push((rank, (index, orientation), pose));
+            }
+        }
+        let kept = distinct_best(descended, &settings, initial);
+        let descents_s = started.elapsed().as_secs_f64() - screening_s;
+
+        // Refinements at full resolution: the lowest final cost wins.
+        report(SearchPhase::Descents, screened.len(), screened.len());
+        let mut best: Option<(usize, Outcome)> = None;
+        let mut refined_costs = Vec::with_capacity(kept.len());
+        for (rank, &(_, pose)) in kept.iter().enumerate() {
+            report(SearchPhase::Refinements, rank, kept.len());
+            let outcome = self.run(settings.refine_method, desired, pose)?;
+            let cost = match outcome.stop {
+                StopReason::Diverged(_) => f64::INFINITY,
+                _ if outcome.cost.is_finite() => outcome.cost,
+                _ => f64::INFINITY,
+            };
+            refined_costs.push(cost);
+            let better = match &best {
+                None => true,
+                Some((r, _)) => cost < refined_costs[*r],
+            };
+            if better {
+                best = Some((rank, outcome));
+            }
+        }
+        report(SearchPhase::Refinements, kept.len(), kept.len());
+        let (chosen_rank, mut outcome) = best.expect("at least one refinement");
+        let (chosen, chosen_orientation) = kept[chosen_rank].0;
+        let chosen_node_m = nodes.get(chosen).copied();
+        outcome.time_s = started.elapsed().as_secs_f64();
+        outcome.search = Some(SearchReport {
+            candidates: nodes.len() * angles.len(),
+            descents: screened.len(),
+            refinements: kept.len(),
+            descent_iterations,
+            chosen_node_m,
+            chosen_heading_deg: chosen_node_m.map(|_| angles[chosen_orientation][2].to_degrees()),
+            chosen_rank,
+            refined_costs,
+            phase_times_s: [
+                screening_s,
+                descents_s,
+                outcome.time_s - screening_s - descents_s,
+            ],
+        });
+        Ok(outcome)
+    }
+
+    /// The index of the global search's low-resolution level, built on first use.
+    fn search_level(&mut self) -> Result<usize, VvsError> {
+        let factor = self.config.global.search_downsampling;
+        if factor == 1 {
+            return Ok(0);
+        }
+        let index = self.config.pyramid_levels as usize;
+        if self.levels.len() == index {
+            let camera = self
+                .camera
+                .downsampled(factor)
+                .map_err(|e| VvsError::Config {
+                    name: "global.search_downsampling",
+                    message: e.to_string(),
+                })?;
+            self.levels.push(Level::new(camera, &self.config)?);
+        }
+        Ok(index)
+    }
+
+    /// The orientations of the search (heading × tilts of `prior`: `[θwX, θwY, θwZ]`,
+    /// radians) and the desired picture turned back by each, with its PGM at `lambda` on level `search`.
+    /// Candidates (`nodes` × orientations) and the memory of the desired PGMs are
+    /// bounded before anything is allocated for them.
+    fn orientations(
+        &mut self,
+        search: usize,
+        desired_small: &impl AnyImage,
+        prior: &PriorBox,
+        settings: &GlobalConfig,
+        nodes: usize,
+        lambda: f32,
+    ) -> Result<(Vec<[f64; 3]>, Orientations), VvsError> {
+        let tilts = [
+            prior.tilts_rad(0, settings.tilt_spacing_deg)?,
+            prior.tilts_rad(1, settings.tilt_spacing_deg)?,
+        ];
+        let heading_list = prior.headings_rad(settings.heading_spacing_deg)?;
+        let orientation_count = heading_list
+            .len()
+            .saturating_mul(tilts[0].len())
+            .saturating_mul(tilts[1].len());
+        if nodes.saturating_mul(orientation_count) > MAX_CANDIDATES {
+            return Err(VvsError::Config {
+                name: "global.heading_spacing_deg",
+                message: format!(
+                    "{nodes} positions × {orientation_count} orientations (headings × tilts) is more than {MAX_CANDIDATES} candidates",
+                ),
+            });
+        }
+        let angles: Vec<[f64; 3]> = heading_list
+            .into_iter()
+            .flat_map(|h| {
+                let tilts = &tilts;
+                tilts[0]
+                    .iter()
+                    .flat_map(move |&x| tilts[1].iter().map(move |&y| [x, y, h]))
+            })
+            .collect();
+        // The desired PGM and weights of every orientation are kept (8 bytes a sample):
+        // at most 512 MB.
+        let samples = self.levels[search].pgm.samples().len();
+        if angles.len().saturating_mul(samples) > 1 << 26 {
+            return Err(VvsError::Config {
+                name: "global.heading_spacing_deg",
+                message: format!(
+                    "{} orientations × {samples} samples at the search's resolution would hold more than 512 MB",
+                    angles.len()
+                ),
+            });
+        }
+        let mut o = Orientations {
+            costs: vec![f64::INFINITY; angles.len()],
+            squared: vec![f64::INFINITY; angles.len()],
+            ..Orientations::default()
+        };
+        let common = self.config.support == Support::Common;
+        for &[x, y, heading] in &angles {
+            let level = &mut self.levels[search];
+            let g_star = if [x, y, heading] == [0.0; 3] {
+                if common {
+                    let n = desired_small.intensity().len();
+                    let mut observed = vec![false; n];
+                    desired_small.observed(0..n, &mut observed);
+                    o.pictures.push(Image::from_parts(
+                        desired_small.width(),
+                        desired_small.height(),
+                        desired_small.intensity().to_vec(),
+                        observed,
+                    )?);
+                }
+                level.pgm.transform(desired_small, lambda)?
+            } else if [x, y] == [0.0; 2] {
+                // A turn about the optical axis keeps the field: every sample compared
+                // (its own formula, as measured before tilts were searched).
+                let turned = turned_about_optical_axis(desired_small, &level.camera, -heading)?;
+                if common {
+                    o.pictures.push(turned.clone());
+                }
+                level.pgm.transform(&turned, lambda)?
+            } else {
+                // A tilted view loses part of the field: compare only the samples
+                // farther than 2λ from what the turn leaves unobserved.
+                let rotation = Isometry3::from_pose_vector([0.0, 0.0, 0.0, x, y, heading])?;
+                let turned = turned(desired_small, &level.camera, rotation.rotation.inverse())?;
+                let radius = (2.0 * lambda).ceil() as usize;
+                let clear = clear_of_missing(&level.camera, &turned.valid, radius);
+                let at = o.weights.len();
+                o.weights.resize(at + level.pgm.samples().len(), 1.0);
+                for (w, &k) in o.weights[at..].iter_mut().zip(level.pgm.samples()) {
+                    *w = if clear[k as usize] { 1.0 } else { 0.0 };
+                }
+                if common {
+                    o.pictures.push(turned.clone());
+                }
+                level.pgm.transform(&turned, lambda)?
+            };
+            o.masked.push(o.weights.len() > o.desired.len());
+            o.desired.extend_from_slice(g_star);
+            o.weights.resize(o.desired.len(), 1.0);
+        }
+        Ok((angles, o))
+    }
+
+    /// The screening's scores at `world_from_camera` on level `level` against each
+    /// orientation's desired picture (into `o.costs`, and `o.squared` on the common
+    /// support; infinite where the pose is outside the cloud's enlarged bounds or sees
+    /// too little of it): the mean squared PGM residual, or on the common support one
+    /// minus the PGMs' correlation and their mean squared difference, each divided by
+    /// the fraction of the picture compared.
+    fn search_cost(
+        &mut self,
+        level: usize,
+        world_from_camera: &Isometry3,
+        lambda: f32,
+        o: &mut Orientations,
+    ) -> Result<(), VvsError> {
+        o.costs.fill(f64::INFINITY);
+        if outside(
+            self.bounds,
+            self.config.bounds_margin_m,
+            world_from_camera.translation,
+        ) {
+            return Ok(());
+        }
+        let Level {
+            camera,
+            renderer,
+            frame,
+            pgm,
+            desired_pgm,
+            support,
+            ..
+        } = &mut self.levels[level];
+        let stats = renderer.render(self.cloud, &world_from_camera.inverse(), frame)?;
+        let valid = camera.valid_pixel_count().max(1) as f64;
+        if (stats.pixels_hit as f64) / valid < self.config.min_hit_fraction {
+            return Ok(());
+        }
+        if self.config.support == Support::Common {
+            // Each orientation on its own common support: the node's hits that the
+            // turned picture observes.
+            let samples = pgm.samples().len().max(1);
+            for ((((cost, squared), picture), weights), &masked) in o
+                .costs
+                .iter_mut()
+                .zip(o.squared.iter_mut())
+                .zip(&o.pictures)
+                .zip(o.weights.chunks_exact(samples))
+                .zip(&o.masked)
+            {
+                for ((s, &v), status) in support.iter_mut().zip(&picture.valid).zip(&frame.status) {
+                    *s = v && *status == PixelStatus::Hit;
+                }
+                let g = pgm.transform(&Restricted::new(&*frame, support)?, lambda)?;
+                o.scratch.clear();
+                o.scratch.extend_from_slice(g);
+                let g_star = desired_pgm.transform(&Restricted::new(picture, support)?, lambda)?;
+                // The two PGMs' correlation over the compared samples (scale-free, where
+                // the mean squared difference depends on the support's shape), its
+                // shortfall divided by the fraction of the picture compared.
+                let (mut w_sum, mut a_sum, mut b_sum) = (0.0f64, 0.0f64, 0.0f64);
+                let (mut aa, mut bb, mut ab) = (0.0f64, 0.0f64, 0.0f64);
+                for (k, (&a, &b)) in o.scratch.iter().zip(g_star).enumerate() {
+                    let w = if masked { f64::from(weights[k]) } else { 1.0 };
+                    let (a, b) = (f64::from(a), f64::from(b));
+                    w_sum += w;
+                    a_sum += w * a;
+                    b_sum += w * b;
+                    aa += w * a * a;
+                    bb += w * b * b;
+                    ab += w * a * b;
+                }
+                let compared = support.iter().filter(|&&s| s).count() as f64;
+                let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
+                let coverage = compared / observed;
+                (*cost, *squared) = if w_sum > 0.0 && coverage > 0.0 {
+                    let (ma, mb) = (a_sum / w_sum, b_sum / w_sum);
+                    let (va, vb) = (aa / w_sum - ma * ma, bb / w_sum - mb * mb);
+                    let correlation = (ab / w_sum - ma * mb) / (va * vb).sqrt().max(1e-30);
+                    let mean_squared = (aa - 2.0 * ab + bb) / w_sum;
+                    (
+                        (1.0 - correlation) / coverage,
+                        mean_squared.max(0.0) / coverage,
+                    )
+                } else {
+                    (f64::INFINITY, f64::INFINITY)
+                };
+            }
+            return Ok(());
+        }
+        let g = pgm.transform(frame, lambda)?;
+        let n = g.len().max(1);
+        for (((cost, desired), weights), &masked) in o
+            .costs
+            .iter_mut()
+            .zip(o.desired.chunks_exact(n))
+            .zip(o.weights.chunks_exact(n))
+            .zip(&o.masked)
+        {
+            if !masked {
+                let sum: f64 = g
+                    .iter()
+                    .zip(desired)
+                    .map(|(&a, &b)| {
+                        let e = f64::from(a - b);
+                        e * e
+                    })
+                    .sum();
+                *cost = sum / n as f64;
+            } else {
+                let (mut sum, mut count) = (0.0f64, 0.0f64);
+                for ((&a, &b), &w) in g.iter().zip(desired).zip(weights) {
+                    let e = f64::from(a - b);
+                    sum += f64::from(w) * e * e;
+                    count += f64::from(w);
+                }
+                *cost = if count > 0.0 {
+                    sum / count
+                } else {
+                    f64::INFINITY
+                };
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The candidates that descend: the `screened` best by cost; on the common support
+/// the `screened` best by each score, in turn (the correlation finds a photograph's
+/// pose where small smooth supports fool the squared difference, which tells apart
+/// renderings whose PGMs differ in contrast alone: either list alone loses poses the
+/// other finds).
+fn select(
+    mut screened: Vec<Candidate>,
+    mut squared: Vec<Candidate>,
+    common: bool,
+    count: usize,
+) -> Vec<Candidate> {
+    let order =
+        |a: &Candidate, b: &Candidate| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2));
+    screened.sort_by(order);
+    if !common {
+        screened.truncate(count);
+        return screened;
+    }
+    squared.sort_by(order);
+    let target = 2 * count;
+    let mut merged: Vec<Candidate> = Vec::with_capacity(target);
+    let mut lists = [screened.iter(), squared.iter()];
+    'merge: while merged.len() < target {
+        let mut any = false;
+        for list in &mut lists {
+            for &(score, index, orientation) in list.by_ref() {
+                any = true;
+                if !merged.iter().any(|m| (m.1, m.2) == (index, orientation)) {
+                    merged.push((score, index, orientation));
+                    break;
+                }
+            }
+            if merged.len() == target {
+                break 'merge;
+            }
+        }
+        if !any {
+            break;
+        }
+    }
+    merged
+}
+
+/// The descents refined: the [`GlobalConfig::refined`] best by rank, each farther than
+/// [`GlobalConfig::merge_distance_m`] from every better one kept; the initial pose
+/// itself when every descent diverged (its refinement says how).
+fn distinct_best(
+    mut descended: Vec<(f64, (usize, usize), Isometry3)>,
+    settings: &GlobalConfig,
+    initial: Isometry3,
+) -> Vec<((usize, usize), Isometry3)> {
+    descended.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let mut kept: Vec<((usize, usize), Isometry3)> = Vec::with_capacity(settings.refined);
+    for &(_, index, pose) in &descended {
+        if kept.len() == settings.refined {
+            break;
+        }
+        let duplicate = kept.iter().any(|(_, other)| {
+            (pose.translation - other.translation).length() < settings.merge_distance_m
+        });
+        if !duplicate {
+            kept.push((index, pose));
+        }
+    }
+    if kept.is_empty() {
+        kept.push(((usize::MAX, 0), initial));
+    }
+    kept
+}

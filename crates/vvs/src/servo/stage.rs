@@ -1,0 +1,529 @@
+//! One stage of a method: its plan ([`Planned`], from [`plan`]) and its loop
+//! ([`crate::Servo::run_stage`]): render, feature, residuals, update, until a stop.
+
+use std::time::Instant;
+
+use brightness::{Against, Brightness, normal_equations, normal_equations_with_column};
+use frame::{AnyImage, Frame, PixelStatus, Restricted};
+use glam::DVec3;
+use pgm::Pgm;
+use ucm::Isometry3;
+
+use super::Level;
+use crate::solve::solve;
+use crate::vignetting::MAX_COEFFICIENT;
+use crate::{
+    Divergence, IterationRecord, Method, Robust, Servo, StopReason, Support, VvsConfig, VvsError,
+};
+
+/// One stage of a method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Stage {
+    /// PoVS: the brightness.
+    Brightness,
+    /// A PGM stage: its desired extent λ*, the λ it starts at, and whether λ is
+    /// optimised with the pose.
+    Pgm {
+        lambda_star: f32,
+        lambda_start: f32,
+        optimise_lambda: bool,
+    },
+}
+
+/// A stage with its step (1 or 2), pyramid level and iteration cap.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Planned {
+    pub(crate) stage: Stage,
+    pub(crate) step: u8,
+    pub(crate) level: usize,
+    /// Most iterations this stage may take; the step's last stage takes whatever the
+    /// step's budget has left.
+    pub(crate) cap: usize,
+    pub(crate) last_of_step: bool,
+    /// The stall test's window for this stage (`VvsConfig::stall_window`, or
+    /// `intermediate_stall_window` for step 1's stages before a step 2).
+    pub(crate) stall_window: usize,
+}
+
+/// How a stage ended: why, with which λ and cost, after how many iterations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct StageResult {
+    pub(crate) stop: StopReason,
+    pub(crate) lambda: f32,
+    pub(crate) cost: f64,
+    pub(crate) iterations: usize,
+}
+
+/// The stages of a local method: step 1 (coarse pyramid levels first, then the full
+/// resolution at λ*₁, then the λ schedule; or, coarse to fine, λ*₁ and the schedule
+/// each at its level), then step 2 (PoVS: one stage of brightness).
+pub(crate) fn plan(c: &VvsConfig, method: Method) -> Vec<Planned> {
+    if method == Method::Povs {
+        return vec![Planned {
+            stage: Stage::Brightness,
+            step: 1,
+            level: 0,
+            cap: c.max_iterations,
+            last_of_step: true,
+            stall_window: c.stall_window,
+        }];
+    }
+    let first_lambda_factor = if method == Method::Rule0 {
+        c.rule0_lambda_factor
+    } else {
+        1.0
+    };
+    // (λ*, level) of step 1's stages.
+    let step1: Vec<(f32, usize)> = match c.coarse_min_lambda_px {
+        None => {
+            let mut step1: Vec<(f32, usize)> = (1..c.pyramid_levels as usize)
+                .rev()
+                .map(|k| (c.lambda_star_step1 / (1u32 << k) as f32, k))
+                .collect();
+            step1.push((c.lambda_star_step1, 0));
+            step1.extend(c.lambda_schedule.iter().map(|&l| (l, 0)));
+            step1
+        }
+        Some(min_lambda) => std::iter::once(c.lambda_star_step1)
+            .chain(c.lambda_schedule.iter().copied())
+            .map(|lambda| {
+                // The coarsest level at which λ* stays at least `min_lambda` (the
+                // full resolution if λ* itself is below it).
+                let level = (0..c.pyramid_levels as usize)
+                    .rev()
+                    .find(|&k| lambda / (1u32 << k) as f32 >= min_lambda)
+                    .unwrap_or(0);
+                (lambda / (1u32 << level) as f32, level)
+            })
+            .collect(),
+    };
+    let n = step1.len();
+    let mut planned: Vec<Planned> = step1
+        .into_iter()
+        .enumerate()
+        .map(|(i, (lambda_star, level))| Planned {
+            stage: Stage::Pgm {
+                lambda_star,
+                lambda_start: if i == 0 {
+                    first_lambda_factor * lambda_star
+                } else {
+                    lambda_star
+                },
+                optimise_lambda: true,
+            },
+            step: 1,
+            level,
+            cap: if i + 1 == n {
+                c.step1_max_iterations
+            } else {
+                c.step1_max_iterations / n
+            },
+            last_of_step: i + 1 == n,
+            stall_window: c.intermediate_stall_window.unwrap_or(c.stall_window),
+        })
+        .collect();
+    planned.push(Planned {
+        stage: Stage::Pgm {
+            lambda_star: c.lambda_star_step2,
+            lambda_start: c.lambda_star_step2,
+            optimise_lambda: method == Method::Rule2,
+        },
+        step: 2,
+        level: 0,
+        cap: c.max_iterations - c.step1_max_iterations,
+        last_of_step: true,
+        stall_window: c.stall_window,
+    });
+    planned
+}
+
+impl Servo<'_> {
+    /// One stage, from `pose` (updated in place).
+    pub(crate) fn run_stage(
+        &mut self,
+        planned: Planned,
+        budget: usize,
+        desired: &impl AnyImage,
+        pose: &mut Isometry3,
+        coefficients: &mut [f64; 2],
+        history: &mut Vec<IterationRecord>,
+    ) -> Result<StageResult, VvsError> {
+        let Planned {
+            stage,
+            step: stage_number,
+            level,
+            stall_window,
+            ..
+        } = planned;
+        let Level {
+            camera,
+            renderer,
+            frame,
+            pgm,
+            brightness,
+            vignetting,
+            corrected,
+            derivative,
+            derivative_pgm,
+            desired_pgm,
+            desired_brightness,
+            support,
+            against,
+            against_observed,
+        } = &mut self.levels[level];
+        let vignetting_on = self.config.vignetting;
+        let common = self.config.support == Support::Common;
+        // The desired feature, fixed for the stage (on the common support: taken again
+        // at every iteration).
+        let (mut lambda, optimise_lambda) = match stage {
+            Stage::Brightness => {
+                if !common {
+                    brightness.compute(desired)?;
+                    self.desired.clear();
+                    self.desired.extend_from_slice(brightness.values());
+                }
+                (0.0, false)
+            }
+            Stage::Pgm {
+                lambda_star,
+                lambda_start,
+                optimise_lambda,
+            } => {
+                if !common {
+                    let g = pgm.transform(desired, lambda_star)?;
+                    self.desired.clear();
+                    self.desired.extend_from_slice(g);
+                }
+                (lambda_start, optimise_lambda)
+            }
+        };
+        let valid_count = camera.valid_pixel_count().max(1) as f64;
+        let mut initial_cost = None;
+        // On the common support: the fraction of the picture's observed pixels compared.
+        let mut coverage = 1.0f64;
+        let mut cost = f64::NAN;
+        self.costs.clear();
+        let (stop, iterations) = 'stage: {
+            for iteration in 0..budget {
+                let started = Instant::now();
+                let stats = renderer.render(self.cloud, &pose.inverse(), frame)?;
+                let hits = stats.pixels_hit as f64;
+                if hits / valid_count < self.config.min_hit_fraction {
+                    break 'stage (StopReason::Diverged(Divergence::NoValidPixels), iteration);
+                }
+                // The rendering as the camera would see it (with the vignetting model).
+                let input: &Frame = if vignetting_on {
+                    vignetting.apply(*coefficients, frame, corrected);
+                    corrected
+                } else {
+                    frame
+                };
+                // Feature, residuals, rows.
+                if common {
+                    // The pixels compared: the rendering's hits the picture observes.
+                    desired.observed(0..support.len(), against_observed);
+                    for ((s, &o), status) in support
+                        .iter_mut()
+                        .zip(&*against_observed)
+                        .zip(&frame.status)
+                    {
+                        *s = o && *status == PixelStatus::Hit;
+                    }
+                    let desired_view = Restricted::new(desired, support)?;
+                    self.desired.clear();
+                    let normalized = match stage {
+                        Stage::Brightness => {
+                            desired_brightness.compute(&desired_view)?;
+                            self.desired.extend_from_slice(desired_brightness.values());
+                            &*desired_brightness
+                        }
+                        Stage::Pgm { lambda_star, .. } => {
+                            self.desired.extend_from_slice(
+                                desired_pgm.transform(&desired_view, lambda_star)?,
+                            );
+                            desired_pgm.brightness()
+                        }
+                    };
+                    // The desired picture as compared, beyond the support too (where the
+                    // support's edge sweeps).
+                    let (mean, scale) = (
+                        normalized.normalization_mean(),
+                        f64::from(normalized.normalization_scale()),
+                    );
+                    for ((a, &i), &o) in against
+                        .iter_mut()
+                        .zip(desired.intensity())
+                        .zip(&*against_observed)
+                    {
+                        *a = if o {
+                            ((f64::from(i) - mean) * scale) as f32
+                        } else {
+                            0.0
+                        };
+                    }
+                    let compared = support.iter().filter(|&&s| s).count();
+                    let observed = against_observed.iter().filter(|&&o| o).count();
+                    coverage = compared as f64 / observed.max(1) as f64;
+                    let view = Restricted::new(input, support)?;
+                    let against = Against {
+                        intensity: against,
+                        observed: against_observed,
+                    };
+                    match stage {
+                        Stage::Brightness => brightness.compute_against(&view, against)?,
+                        Stage::Pgm { .. } => {
+                            pgm.compute_against(&view, against, lambda, self.config.jacobian)?
+                        }
+                    }
+                } else {
+                    compute_feature(stage, brightness, pgm, input, lambda, self.config.jacobian)?;
+                }
+                let (values, pixel_weights): (&[f32], Option<&[f32]>) = match stage {
+                    Stage::Brightness => (brightness.values(), None),
+                    Stage::Pgm { .. } => (pgm.values(), Some(pgm.weights())),
+                };
+                if vignetting_on {
+                    // The columns of the coefficients: the feature of each derivative picture.
+                    let feature = match stage {
+                        Stage::Brightness => &*brightness,
+                        Stage::Pgm { .. } => pgm.brightness(),
+                    };
+                    let normalization = self
+                        .config
+                        .normalize
+                        .then(|| (feature.normalization_scale(), feature.image()));
+                    for (k, column) in self.columns.iter_mut().enumerate() {
+                        vignetting.derivative(
+                            k,
+                            frame,
+                            feature.samples(),
+                            feature.observed(),
+                            normalization,
+                            derivative,
+                        );
+                        column.clear();
+                        match stage {
+                            Stage::Brightness => column.extend(
+                                feature
+                                    .samples()
+                                    .iter()
+                                    .map(|&s| derivative.intensity[s as usize]),
+                            ),
+                            Stage::Pgm { .. } => column
+                                .extend_from_slice(derivative_pgm.transform(derivative, lambda)?),
+                        }
+                    }
+                }
+                let m = values.len();
+                self.residuals.clear();
+                self.residuals
+                    .extend(values.iter().zip(&self.desired).map(|(a, b)| a - b));
+                self.weights.clear();
+                match pixel_weights {
+                    Some(w) => self.weights.extend_from_slice(w),
+                    None => self.weights.resize(m, 1.0),
+                }
+                if let Some(Robust::Tukey { c }) = self.config.robust {
+                    tukey_weights(&self.residuals, c, &mut self.weights, &mut self.scratch);
+                }
+                // Both sums in one loop: each is a chain of dependent additions (in order,
+                // from -0.0 as `Iterator::sum`), and two chains run side by side.
+                debug_assert_eq!(self.residuals.len(), self.weights.len());
+                let (mut weight_sum, mut weighted) = (-0.0f64, -0.0f64);
+                for (&e, &w) in self.residuals.iter().zip(&self.weights) {
+                    weight_sum += f64::from(w);
+                    weighted += f64::from(w) * f64::from(e) * f64::from(e);
+                }
+                // On the common support the residuals are of pictures normalised over the
+                // pixels compared, whatever their number: the cost is divided by the
+                // fraction of the picture they cover, so that a pose that sees little of the
+                // cloud does not look good for it (costs are compared between poses).
+                cost = weighted / weight_sum.max(1.0) / coverage.max(1e-3);
+                if !cost.is_finite() {
+                    break 'stage (StopReason::Diverged(Divergence::NotFinite), iteration);
+                }
+                let reference = *initial_cost.get_or_insert(cost);
+                if cost > self.config.divergence_cost_factor * reference.max(1e-30) {
+                    break 'stage (StopReason::Diverged(Divergence::CostExploded), iteration);
+                }
+                self.costs.push(cost);
+                if stalled(
+                    &self.costs,
+                    stall_window,
+                    self.config.stall_relative_decrease,
+                ) {
+                    break 'stage (StopReason::Stalled, iteration);
+                }
+                // The update: x = −μ J⁺ e.
+                let eta = self.config.levenberg_marquardt;
+                let mut coefficient_update = [0.0; 2];
+                let solution: Option<([f64; 6], f64)> = match stage {
+                    _ if vignetting_on => {
+                        let (rows, j_lambda): (&[[f32; 6]], Option<&[f32]>) = match stage {
+                            Stage::Brightness => (brightness.interaction(), None),
+                            Stage::Pgm { .. } => {
+                                (pgm.interaction(), optimise_lambda.then(|| pgm.j_lambda()))
+                            }
+                        };
+                        self.rows9.clear();
+                        self.rows9.extend(rows.iter().enumerate().map(|(s, l)| {
+                            let j = j_lambda.map_or(0.0, |j| j[s]);
+                            [
+                                l[0],
+                                l[1],
+                                l[2],
+                                l[3],
+                                l[4],
+                                l[5],
+                                j,
+                                self.columns[0][s],
+                                self.columns[1][s],
+                            ]
+                        }));
+                        let (jtj, jte) = normal_equations::<9>(
+                            &self.rows9,
+                            &self.residuals,
+                            Some(&self.weights),
+                        );
+                        solve(&jtj, &jte, eta).map(|x| {
+                            coefficient_update = [x[7], x[8]];
+                            ([x[0], x[1], x[2], x[3], x[4], x[5]], x[6])
+                        })
+                    }
+                    Stage::Pgm { .. } if optimise_lambda => {
+                        // [L_G | J_λ], without joining them into rows of 7.
+                        let (jtj, jte) = normal_equations_with_column::<6, 7>(
+                            pgm.interaction(),
+                            pgm.j_lambda(),
+                            &self.residuals,
+                            Some(&self.weights),
+                        );
+                        solve(&jtj, &jte, eta).map(|x| ([x[0], x[1], x[2], x[3], x[4], x[5]], x[6]))
+                    }
+                    _ => {
+                        let rows = match stage {
+                            Stage::Brightness => brightness.interaction(),
+                            Stage::Pgm { .. } => pgm.interaction(),
+                        };
+                        let (jtj, jte) =
+                            normal_equations::<6>(rows, &self.residuals, Some(&self.weights));
+                        solve(&jtj, &jte, eta).map(|x| (x, 0.0))
+                    }
+                };
+                let Some((x, lambda_x)) = solution else {
+                    break 'stage (StopReason::Diverged(Divergence::SingularSystem), iteration);
+                };
+                let gain = self.config.gain;
+                let v = x.map(|c| -gain * c);
+                let lambda_dot = (-gain * lambda_x) as f32;
+                let update_t = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                let update_r = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
+                if self.config.keep_history {
+                    history.push(IterationRecord {
+                        stage: stage_number,
+                        level: level as u8,
+                        pose: pose.to_pose_vector(),
+                        lambda,
+                        cost,
+                        update_translation_m: update_t,
+                        update_rotation_rad: update_r,
+                        time_s: started.elapsed().as_secs_f64(),
+                    });
+                }
+                let Ok(update) = Isometry3::exp(v) else {
+                    break 'stage (StopReason::Diverged(Divergence::NotFinite), iteration + 1);
+                };
+                *pose = *pose * update;
+                if vignetting_on {
+                    for (c, dc) in coefficients.iter_mut().zip(coefficient_update) {
+                        *c = (*c - gain * dc).clamp(-MAX_COEFFICIENT, MAX_COEFFICIENT);
+                    }
+                }
+                if optimise_lambda {
+                    lambda = (lambda + lambda_dot)
+                        .clamp(*pgm::LAMBDA_RANGE.start(), *pgm::LAMBDA_RANGE.end());
+                }
+                if !pose.is_finite() || !lambda.is_finite() {
+                    break 'stage (StopReason::Diverged(Divergence::NotFinite), iteration + 1);
+                }
+                let position = pose.translation;
+                if outside(self.bounds, self.config.bounds_margin_m, position) {
+                    break 'stage (StopReason::Diverged(Divergence::LeftBounds), iteration + 1);
+                }
+                if update_t < self.config.converged_translation_m
+                    && update_r < self.config.converged_rotation_rad
+                    && lambda_dot.abs() < 1e-4
+                {
+                    break 'stage (StopReason::Converged, iteration + 1);
+                }
+            }
+            (StopReason::IterationBudget, budget)
+        };
+        Ok(StageResult {
+            stop,
+            lambda,
+            cost,
+            iterations,
+        })
+    }
+}
+
+/// The feature of `picture` for `stage`: the brightness, or the PGM at `lambda`.
+fn compute_feature(
+    stage: Stage,
+    brightness: &mut Brightness,
+    pgm: &mut Pgm,
+    picture: &impl AnyImage,
+    lambda: f32,
+    jacobian: pgm::PgmJacobian,
+) -> Result<(), VvsError> {
+    match stage {
+        Stage::Brightness => brightness.compute(picture)?,
+        Stage::Pgm { .. } => pgm.compute(picture, lambda, jacobian)?,
+    }
+    Ok(())
+}
+
+/// Whether `position` lies outside the box `bounds` (lowest, highest corner) enlarged by
+/// `margin_m` on every side.
+pub(crate) fn outside(bounds: (DVec3, DVec3), margin_m: f64, position: DVec3) -> bool {
+    let margin = DVec3::splat(margin_m);
+    position.cmplt(bounds.0 - margin).any() || position.cmpgt(bounds.1 + margin).any()
+}
+
+/// Whether the lowest cost of the last `window` iterations is not at least
+/// `relative_decrease` below the lowest before them (`window` 0: never).
+fn stalled(costs: &[f64], window: usize, relative_decrease: f64) -> bool {
+    if window == 0 || costs.len() <= window {
+        return false;
+    }
+    let (before, recent) = costs.split_at(costs.len() - window);
+    let best_before = before.iter().copied().fold(f64::INFINITY, f64::min);
+    let best_recent = recent.iter().copied().fold(f64::INFINITY, f64::min);
+    best_recent > (1.0 - relative_decrease) * best_before
+}
+
+/// Tukey biweight: `w *= (1 − (e/(c σ))²)²` for `|e| < c σ`, else 0, with
+/// `σ = 1.4826 × median(|e − median(e)|)`.
+fn tukey_weights(residuals: &[f32], c: f32, weights: &mut [f32], scratch: &mut Vec<f32>) {
+    scratch.clear();
+    scratch.extend_from_slice(residuals);
+    let mid = scratch.len() / 2;
+    if scratch.is_empty() {
+        return;
+    }
+    let median = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
+    for v in scratch.iter_mut() {
+        *v = (*v - median).abs();
+    }
+    let mad = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let threshold = c * 1.4826 * mad.max(1e-12);
+    for (w, &e) in weights.iter_mut().zip(residuals) {
+        let u = (e - median) / threshold;
+        *w *= if u.abs() < 1.0 {
+            (1.0 - u * u).powi(2)
+        } else {
+            0.0
+        };
+    }
+}
