@@ -362,6 +362,7 @@ impl<'a> Servo<'a> {
         o: &mut Orientations,
     ) -> Result<(), VvsError> {
         o.costs.fill(f64::INFINITY);
+        o.squared.fill(f64::INFINITY);
         if outside(
             self.bounds,
             self.config.bounds_margin_m,
@@ -540,4 +541,43 @@ fn distinct_best(
         kept.push(((usize::MAX, 0), initial));
     }
     kept
+}
+
+#[cfg(test)]
+mod tests {
+    use splat::PointCloud;
+    use ucm::Camera;
+
+    use super::*;
+    use crate::VvsConfig;
+
+    /// A node outside the cloud's bounds scores nothing on either of the common
+    /// support's lists: neither keeps the scores of the node screened before it.
+    #[test]
+    fn a_node_outside_the_cloud_is_no_candidate() {
+        let positions: Vec<DVec3> = (0..400)
+            .map(|k| DVec3::new(f64::from(k % 20) * 0.1, f64::from(k / 20) * 0.1, 0.0))
+            .collect();
+        let intensities: Vec<f32> = positions.iter().map(|p| (p.x * 0.4) as f32).collect();
+        let cloud =
+            PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, None).unwrap();
+        let camera = Camera::load_toml(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../fixtures/omni-320x240.toml"),
+        )
+        .unwrap();
+        let config = VvsConfig {
+            support: Support::Common,
+            ..VvsConfig::default()
+        };
+        let mut servo = Servo::new(&cloud, &camera, config).unwrap();
+        let mut o = Orientations {
+            costs: vec![0.5; 2],
+            squared: vec![0.5; 2],
+            ..Orientations::default()
+        };
+        let far = Isometry3::from_translation(DVec3::new(1e4, 0.0, 0.0));
+        servo.search_cost(0, &far, 3.0, &mut o).unwrap();
+        assert!(o.costs.iter().chain(&o.squared).all(|c| c.is_infinite()));
+    }
 }
