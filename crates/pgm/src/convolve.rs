@@ -5,7 +5,7 @@
 //! adds its taps in kernel order, so both passes give the textbook sums bit for bit
 //! (tested). The row pass keeps 32 neighbouring outputs in registers over all taps;
 //! the column pass is an `axpy` over whole rows, one tap at a time (the same in
-//! registers was 3× slower: the taps' rows, 1280 bytes apart at 320 pixels, fall on a
+//! registers was slower: the taps' rows, 1280 bytes apart at 320 pixels, fall on a
 //! few L1 cache sets). Both vectorise, on the widest instruction set found at run time
 //! (the same bits on every one). Rows (and output rows of the column pass) are
 //! independent: with `parallel`, they are spread over rayon's threads, and the result

@@ -107,10 +107,8 @@ pub struct PgmOptions {
     /// whole image still enters every sum; tested); what changes is the number of
     /// residuals, `stride²` times fewer. For a large λ the mixture varies over about λ
     /// pixels, so a stride well below λ keeps its information; the cost of the vertical
-    /// passes falls by the stride (at 320×240, λ = 15, stride 4: 10.6 ms instead of
-    /// 16.6 ms for G, J_λ and L_G on one thread, with the truncated kernels; the
-    /// recursive filters always filter the whole image, so there the stride saves only
-    /// the solve).
+    /// passes of the truncated kernels falls by the stride (the recursive filters always
+    /// filter the whole image, so there the stride saves only the solve).
     pub stride: u32,
     /// Centre and normalise the brightness (zero mean, unit norm over the valid
     /// pixels) before the transform, as the paper does for real images (§4).
@@ -419,8 +417,8 @@ impl Pgm {
     }
 
     /// The recursive filters of `lambda` if the options ask for them at this λ: `g`,
-    /// and `k² g` and `(k/λ²) g` if asked for (each a least-squares fit of about 13 µs:
-    /// designed once per λ, and only when a path needs it).
+    /// and `k² g` and `(k/λ²) g` if asked for (each a least-squares fit: designed once
+    /// per λ, and only when a path needs it).
     fn filters(&mut self, lambda: f32, with_k2g: bool, with_dg: bool) -> Option<Filters> {
         let from = self.options.recursive_from_lambda?;
         if lambda < from {

@@ -12,7 +12,9 @@ use core::arch::x86_64::{__m256, __m256i};
 use pulp::x86::V3;
 
 use super::lanes::{Constants, Vectors, splat_words, unpack};
-use super::{PackedPoint, Splat, View};
+use super::splat::Splat;
+use super::view::View;
+use crate::PackedPoint;
 
 /// `_CMP_GT_OQ` and `_CMP_LT_OQ`: ordered comparisons, false where either is a NaN
 /// (as SSE's `cmpgtps` / `cmpltps`).
@@ -181,8 +183,8 @@ impl Ops {
     }
 }
 
-/// The splats of [`super::project_block`], eight points at a time (the lengths are
-/// equal multiples of eight).
+/// The splats of [`super::project::project_block`], eight points at a time (the lengths
+/// are equal multiples of eight).
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V3,

@@ -1,18 +1,20 @@
 //! The projection of pass 1 on AVX-512, sixteen points per instruction, where the
 //! processor has it (found at run time through [`pulp`], whose wrappers make the
 //! intrinsics safe to call once the instruction set is known to be there). The same
-//! IEEE operations in the same order as [`super::project_point`] and the SSE2 kernel
-//! (no fused multiply-add; `max` returns its second operand where the first is a NaN,
-//! as `maxps` does), hence bit for bit the same splats (tested against both). Sixteen
-//! points (8 bytes each) are loaded as two vectors and taken apart with two two-source
-//! permutes; the splats' words are transposed back with eight more.
+//! IEEE operations in the same order as [`super::project::project_point`] and the SSE2
+//! kernel (no fused multiply-add; `max` returns its second operand where the first is a
+//! NaN, as `maxps` does), hence bit for bit the same splats (tested against both).
+//! Sixteen points (8 bytes each) are loaded as two vectors and taken apart with two
+//! two-source permutes; the splats' words are transposed back with eight more.
 
 use core::arch::x86_64::{__m512, __m512i, __mmask16};
 
 use pulp::x86::V4;
 
 use super::lanes::{Constants, Vectors, splat_words, unpack};
-use super::{PackedPoint, Splat, View};
+use super::splat::Splat;
+use super::view::View;
+use crate::PackedPoint;
 
 /// `_CMP_GT_OQ` and `_CMP_LT_OQ`: ordered comparisons, false where either is a NaN
 /// (as SSE's `cmpgtps` / `cmpltps`).
@@ -157,8 +159,8 @@ impl Ops {
     }
 }
 
-/// The splats of [`super::project_block`], sixteen points at a time (the lengths are
-/// equal multiples of sixteen).
+/// The splats of [`super::project::project_block`], sixteen points at a time (the
+/// lengths are equal multiples of sixteen).
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V4,
@@ -220,7 +222,7 @@ fn four(depth: &[u32], k: usize) -> [u32; 4] {
 /// caller checked that four pixels from its last row's first are in `depth`): each
 /// row's three keys take their minimum with `key` in one instruction (the fourth is
 /// written back as it was). Returns whether a pixel held a range not below `limit`
-/// before (a NaN, an empty pixel, counts): [`super::Depths::splat`]'s result.
+/// before (a NaN, an empty pixel, counts): `pass_one::Depths::splat`'s result.
 #[inline(always)]
 pub(super) fn depth_3x3(
     simd: V4,

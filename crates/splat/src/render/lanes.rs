@@ -1,9 +1,11 @@
 //! The arithmetic of the vector projection kernels, written once for every register
-//! width: the same IEEE operations in the same order as [`super::project_point`], on
-//! four (SSE2), eight (AVX2) or sixteen (AVX-512) points at a time. Each kernel
-//! implements [`Vectors`] for its registers and does its own loads and transposes.
+//! width: the same IEEE operations in the same order as
+//! [`super::project::project_point`], on four (SSE2), eight (AVX2) or sixteen (AVX-512)
+//! points at a time. Each kernel implements [`Vectors`] for its registers and does its
+//! own loads and transposes.
 
-use super::{NOT_DRAWN, View};
+use super::splat::NOT_DRAWN;
+use super::view::View;
 
 /// The operations the projection needs on one register width: `F` holds floats, `I`
 /// 32-bit integers, `M` a lane mask (a register of all-ones lanes on SSE2 and AVX2, a
@@ -54,7 +56,7 @@ pub(super) trait Vectors: Copy {
     fn select(self, mask: Self::M, a: Self::I, b: Self::I) -> Self::I;
 }
 
-/// [`super::floor_small`].
+/// [`super::project::floor_small`].
 #[inline(always)]
 fn floor_small<V: Vectors>(o: V, x: V::F) -> V::I {
     let magic = o.splat(12_582_912.0); // 1.5 · 2^23
@@ -63,13 +65,13 @@ fn floor_small<V: Vectors>(o: V, x: V::F) -> V::I {
     o.minus_one_where(o.gt(o.to_f32(nearest), x), nearest)
 }
 
-/// [`super::limit`].
+/// [`super::project::limit`].
 #[inline(always)]
 fn limit<V: Vectors>(o: V, x: V::F, lo: f32, hi: f32) -> V::F {
     o.min(o.max(x, o.splat(lo)), o.splat(hi))
 }
 
-/// [`super::first_px`]: `round(x) − half`.
+/// `project::first_px`: `round(x) − half`.
 #[inline(always)]
 fn first_px<V: Vectors>(o: V, x: V::F, half: V::I) -> V::I {
     o.sub_i(
@@ -78,7 +80,7 @@ fn first_px<V: Vectors>(o: V, x: V::F, half: V::I) -> V::I {
     )
 }
 
-/// The half-width `(width − 1)/2` of [`super::splat_width`].
+/// The half-width `(width − 1)/2` of `project::splat_width`.
 #[inline(always)]
 fn splat_half<V: Vectors>(o: V, size: V::F, max_half: V::I) -> V::I {
     let h = limit(

@@ -1,7 +1,7 @@
 //! The projection of pass 1 in explicit SSE2 (part of every x86-64 processor), through
-//! `safe_arch`'s safe wrappers of the intrinsics: four points per instruction, the
-//! same IEEE operations in the same order as [`super::project_point`], hence bit for
-//! bit the same splats (tested against it). The compiler's own vectorisation of the
+//! `safe_arch`'s safe wrappers of the intrinsics: four points per instruction, the same
+//! IEEE operations in the same order as [`super::project::project_point`], hence bit
+//! for bit the same splats (tested against it). The compiler's own vectorisation of the
 //! portable kernel gathered each coordinate of each point with its own load; here four
 //! points (8 bytes each) are loaded as two registers and their words taken apart with
 //! two shuffles.
@@ -9,7 +9,9 @@
 use safe_arch::*;
 
 use super::lanes::{Constants, Vectors, splat_words, unpack};
-use super::{PackedPoint, Splat, View};
+use super::splat::Splat;
+use super::view::View;
+use crate::PackedPoint;
 
 /// The kernel's registers (a lane mask is a register of all-ones lanes).
 #[derive(Clone, Copy)]
@@ -145,8 +147,8 @@ fn splat_words_of(v: m128i) -> Splat {
     Splat(lanes.map(|x| x as u32))
 }
 
-/// The splats of [`super::project_block`], four points at a time (`N` is a multiple
-/// of four).
+/// The splats of [`super::project::project_block`], four points at a time (`N` is a
+/// multiple of four).
 #[inline(always)]
 pub(super) fn project_splats<const N: usize>(
     points: &[PackedPoint; N],
