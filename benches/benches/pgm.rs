@@ -157,7 +157,7 @@ fn goal_features(c: &mut Criterion) {
             );
         }
         let every_row = PgmOptions {
-            interaction_row_step_lambdas: None,
+            interaction_row_step_lambdas: 0.0,
             ..one_thread
         };
         let mut every = Pgm::new(&camera, every_row).unwrap();
@@ -167,7 +167,7 @@ fn goal_features(c: &mut Criterion) {
         let mut exact = Pgm::new(
             &camera,
             PgmOptions {
-                recursive_from_lambda: None,
+                recursive_from_lambda: f32::INFINITY,
                 ..one_thread
             },
         )

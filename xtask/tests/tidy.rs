@@ -209,3 +209,53 @@ fn crates_depend_only_on_what_their_concept_needs() {
         }
     }
 }
+
+/// No Rust source file of the project holds more than 1200 lines: a longer one holds
+/// several concepts, which get a module each.
+#[test]
+fn no_source_file_is_longer_than_1200_lines() {
+    fn visit(dir: &Path, long: &mut Vec<String>) {
+        for entry in fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy();
+            if path.is_dir() {
+                if name != "target" && !name.starts_with('.') {
+                    visit(&path, long);
+                }
+            } else if name.ends_with(".rs") {
+                let lines = read(&path).lines().count();
+                if lines > 1200 {
+                    long.push(format!("{} ({lines} lines)", path.display()));
+                }
+            }
+        }
+    }
+    let mut long = Vec::new();
+    for dir in ["crates", "xtask", "benches"] {
+        visit(&project_root().join(dir), &mut long);
+    }
+    assert!(long.is_empty(), "split by concept: {long:?}");
+}
+
+/// The repository speaks of the project, not of how it was made: no tracked file
+/// reads as a diary of its making (history is in git and `CHANGELOG.md`).
+#[test]
+fn no_file_is_a_diary() {
+    let listed = std::process::Command::new("git")
+        .args(["ls-files", "-z"])
+        .current_dir(project_root())
+        .output();
+    // Outside a git checkout (a packaged crate) there is nothing to check.
+    let Ok(listed) = listed else { return };
+    let word = ["ses", "sion"].concat();
+    let mut diary = Vec::new();
+    for path in listed.stdout.split(|&b| b == 0).filter(|p| !p.is_empty()) {
+        let path = project_root().join(String::from_utf8_lossy(path).as_ref());
+        if let Ok(text) = fs::read_to_string(&path)
+            && text.to_lowercase().contains(&word)
+        {
+            diary.push(path.display().to_string());
+        }
+    }
+    assert!(diary.is_empty(), "files speaking of {word}s: {diary:?}");
+}

@@ -120,19 +120,19 @@ pub struct PgmOptions {
     /// From this λ (pixels) up, correlate with recursive filters
     /// ([`crate::recursive`]: a cost per pixel independent of λ, no truncation, kernels
     /// within 2.2e-4 of their peak of the exact ones for λ ≤ 40) instead of the kernels
-    /// truncated at `kernel_radius_lambdas` · λ; `None`: always the truncated kernels.
-    /// Default `Some(3.0)`: below it the truncated kernels (at most 25 taps) are as
+    /// truncated at `kernel_radius_lambdas` · λ; infinite: always the truncated
+    /// kernels. Default 3: below it the truncated kernels (at most 25 taps) are as
     /// cheap, and step 2 of the paper's rules (λ ≈ 1) is computed exactly as before.
-    pub recursive_from_lambda: Option<f32>,
+    pub recursive_from_lambda: f32,
     /// On the recursive path of [`PgmJacobian::Convolved`], `L_G`'s vertical pass keeps
     /// one row in `max(1, ⌊q λ⌋)` (`q` this value) and the samples interpolate
     /// between the kept rows: the six channels of `L_I`, smoothed over λ pixels
     /// vertically, vary little over `q λ` rows: cubics through four kept rows are within
     /// 1.5e-4 of their peak at λ = 15, 3.1e-4 at λ = 40 (tested; the recursive filters'
     /// own error), where a line between two was 20 times worse. Only the Jacobian is
-    /// approximated: `G` and `J_λ`, hence the cost and the optimum, are exact. `None`:
-    /// every row. Default `Some(0.2)`: one row in 3 at λ = 15, every row below λ = 10.
-    pub interaction_row_step_lambdas: Option<f32>,
+    /// approximated: `G` and `J_λ`, hence the cost and the optimum, are exact. 0:
+    /// every row. Default 0.2: one row in 3 at λ = 15, every row below λ = 10.
+    pub interaction_row_step_lambdas: f32,
 }
 
 impl Default for PgmOptions {
@@ -142,8 +142,8 @@ impl Default for PgmOptions {
             stride: 1,
             normalize: false,
             parallel: true,
-            recursive_from_lambda: Some(3.0),
-            interaction_row_step_lambdas: Some(0.2),
+            recursive_from_lambda: 3.0,
+            interaction_row_step_lambdas: 0.2,
         }
     }
 }
@@ -299,20 +299,18 @@ impl Pgm {
                 message: format!("must be >= 1, got {}", options.kernel_radius_lambdas),
             });
         }
-        if let Some(l) = options.recursive_from_lambda
-            && !(l > 0.0 && l.is_finite())
-        {
+        let l = options.recursive_from_lambda;
+        if !(l > 0.0) {
             return Err(PgmError::Option {
                 name: "recursive_from_lambda",
-                message: format!("must be > 0 and finite, got {l}"),
+                message: format!("must be > 0 (infinite: never), got {l}"),
             });
         }
-        if let Some(q) = options.interaction_row_step_lambdas
-            && !(q > 0.0 && q.is_finite())
-        {
+        let q = options.interaction_row_step_lambdas;
+        if !(q >= 0.0 && q.is_finite()) {
             return Err(PgmError::Option {
                 name: "interaction_row_step_lambdas",
-                message: format!("must be > 0 and finite, got {q}"),
+                message: format!("must be >= 0 (0: every row) and finite, got {q}"),
             });
         }
         if options.stride == 0 {
@@ -420,8 +418,7 @@ impl Pgm {
     /// and `k² g` and `(k/λ²) g` if asked for (each a least-squares fit: designed once
     /// per λ, and only when a path needs it).
     fn filters(&mut self, lambda: f32, with_k2g: bool, with_dg: bool) -> Option<Filters> {
-        let from = self.options.recursive_from_lambda?;
-        if lambda < from {
+        if lambda < self.options.recursive_from_lambda {
             return None;
         }
         let mut filters = match self.filters {
@@ -676,10 +673,7 @@ impl Pgm {
         self.lanes.resize(n, [0.0; 6]);
         self.lanes_t.resize(n, [0.0; 6]);
         let win = self.window;
-        let step = self
-            .options
-            .interaction_row_step_lambdas
-            .map_or(1, |q| ((q * f.lambda) as usize).max(1));
+        let step = ((self.options.interaction_row_step_lambdas * f.lambda) as usize).max(1);
         // At least four kept rows for the cubic (else every row).
         let step = if recursive::kept_rows(win.rows, step) < 4 {
             1

@@ -245,18 +245,6 @@ impl Default for VvsConfig {
 }
 
 impl VvsConfig {
-    /// [`VvsConfig::pgm_recursive_from_lambda`] as the PGM's option.
-    pub(crate) fn pgm_recursive(&self) -> Option<f32> {
-        let from = self.pgm_recursive_from_lambda;
-        from.is_finite().then_some(from)
-    }
-
-    /// [`VvsConfig::pgm_interaction_row_step_lambdas`] as the PGM's option.
-    pub(crate) fn pgm_interaction_row_step(&self) -> Option<f32> {
-        let q = self.pgm_interaction_row_step_lambdas;
-        (q > 0.0).then_some(q)
-    }
-
     /// Check every field against its documented range.
     pub fn validate(&self) -> Result<(), VvsError> {
         let bad = |name: &'static str, message: String| Err(VvsError::Config { name, message });

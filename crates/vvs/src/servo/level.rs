@@ -39,8 +39,8 @@ fn pgm_options(config: &VvsConfig, normalize: bool) -> PgmOptions {
         stride: config.pgm_stride,
         normalize,
         parallel: config.parallel,
-        recursive_from_lambda: config.pgm_recursive(),
-        interaction_row_step_lambdas: config.pgm_interaction_row_step(),
+        recursive_from_lambda: config.pgm_recursive_from_lambda,
+        interaction_row_step_lambdas: config.pgm_interaction_row_step_lambdas,
         ..PgmOptions::default()
     }
 }
