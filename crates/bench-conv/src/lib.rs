@@ -30,6 +30,7 @@
 #![deny(missing_docs)]
 
 pub mod check;
+pub mod csv_io;
 pub mod progress;
 pub mod protocol;
 pub mod real;
@@ -112,11 +113,9 @@ pub fn parse_numbers<const N: usize>(text: &str) -> anyhow::Result<[f64; N]> {
 /// `world_from_camera` from the command line's `--pose` (the paper's `(t, θw)`) or
 /// `--looking-down` (`x, y, z, heading_deg`): a [`protocol::PoseSpec`].
 pub fn parse_pose(pose: Option<&str>, looking_down: Option<&str>) -> anyhow::Result<Isometry3> {
-    let spec = protocol::PoseSpec {
-        pose: pose.map(parse_numbers::<6>).transpose()?,
-        looking_down: looking_down.map(parse_numbers::<4>).transpose()?,
-    };
-    spec.world_from_camera()
+    let pose = pose.map(parse_numbers::<6>).transpose()?;
+    let looking_down = looking_down.map(parse_numbers::<4>).transpose()?;
+    protocol::PoseSpec::from_options(looking_down, pose)?.world_from_camera()
 }
 
 /// Check the `frame_steps` of a tracking experiment over `frames` frames (1 frame in

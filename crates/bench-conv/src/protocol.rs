@@ -242,32 +242,59 @@ impl Sampling {
     }
 }
 
-/// A pose as a user gives it, in a file (`pose = […]` or `looking_down = […]`) or on
-/// the command line (`--pose` or `--looking-down`): exactly one of the two.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct PoseSpec {
+/// A pose as a user gives it, in a file (`pose = […]` or `looking_down = […]`, exactly
+/// one) or on the command line (`--pose` or `--looking-down`, exactly one).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(try_from = "PoseFields")]
+pub enum PoseSpec {
     /// `x, y, z` (m) and heading (deg) of a camera looking down.
-    #[serde(default)]
-    pub looking_down: Option<[f64; 4]>,
+    LookingDown([f64; 4]),
     /// The paper's pose vector `(t, θw)` of `world_from_camera` (m, rad).
+    Pose([f64; 6]),
+}
+
+/// A [`PoseSpec`]'s table as written, before exactly one of its fields is checked.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PoseFields {
     #[serde(default)]
-    pub pose: Option<[f64; 6]>,
+    looking_down: Option<[f64; 4]>,
+    #[serde(default)]
+    pose: Option<[f64; 6]>,
+}
+
+impl TryFrom<PoseFields> for PoseSpec {
+    type Error = String;
+
+    fn try_from(fields: PoseFields) -> Result<Self, String> {
+        PoseSpec::from_options(fields.looking_down, fields.pose).map_err(|e| e.to_string())
+    }
 }
 
 impl PoseSpec {
+    /// The pose given by exactly one of `looking_down` and `pose`.
+    pub fn from_options(
+        looking_down: Option<[f64; 4]>,
+        pose: Option<[f64; 6]>,
+    ) -> anyhow::Result<Self> {
+        match (looking_down, pose) {
+            (Some(l), None) => Ok(PoseSpec::LookingDown(l)),
+            (None, Some(r)) => Ok(PoseSpec::Pose(r)),
+            _ => bail!("give exactly one of `looking_down` and `pose`"),
+        }
+    }
+
     /// `world_from_camera`.
     pub fn world_from_camera(&self) -> anyhow::Result<Isometry3> {
-        match (self.looking_down, self.pose) {
-            (Some(l), None) if !l.iter().all(|v| v.is_finite()) => {
+        match *self {
+            PoseSpec::LookingDown(l) if !l.iter().all(|v| v.is_finite()) => {
                 bail!("looking_down {l:?} is not finite")
             }
-            (Some([x, y, z, heading]), None) => Ok(world::city::camera_looking_down(
+            PoseSpec::LookingDown([x, y, z, heading]) => Ok(world::city::camera_looking_down(
                 glam::DVec3::new(x, y, z),
                 heading.to_radians(),
             )),
-            (None, Some(r)) => Ok(Isometry3::from_pose_vector(r)?),
-            _ => bail!("give exactly one of `looking_down` and `pose`"),
+            PoseSpec::Pose(r) => Ok(Isometry3::from_pose_vector(r)?),
         }
     }
 }
@@ -414,12 +441,10 @@ impl Protocol {
             prior.validate()?;
         }
         for (k, d) in self.desired.iter().enumerate() {
-            self.desired_pose(k)
-                .with_context(|| match (d.looking_down, d.pose) {
-                    (Some(l), _) => format!("desired pose {k}: looking_down = {l:?}"),
-                    (None, Some(p)) => format!("desired pose {k}: pose = {p:?}"),
-                    (None, None) => format!("desired pose {k}"),
-                })?;
+            self.desired_pose(k).with_context(|| match d {
+                PoseSpec::LookingDown(l) => format!("desired pose {k}: looking_down = {l:?}"),
+                PoseSpec::Pose(p) => format!("desired pose {k}: pose = {p:?}"),
+            })?;
         }
         let configs = self.method_configs(true)?;
         let mut names: Vec<&str> = configs.iter().map(|c| c.name.as_str()).collect();

@@ -1,5 +1,6 @@
 //! Integration tests of `bench-conv`: protocol files, shards and merge, reports.
 
+mod csv_io;
 mod fuzz;
 mod protocol;
 mod real;

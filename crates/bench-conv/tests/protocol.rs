@@ -465,6 +465,81 @@ fn the_papers_rates_stand_beside_its_configurations_only() {
     assert_eq!(paper_success_rate("rule2/convolved+lm"), None);
     assert_eq!(paper_success_rate("rule2/convolved+no-stall"), None);
     assert_eq!(paper_success_rate("my-method"), None);
+    // A name is `method` or `method/jacobian`, spelt as the protocol writes them.
+    assert_eq!(paper_success_rate("rule2"), Some(97.0));
+    assert_eq!(paper_success_rate("rule2/convolved"), Some(97.0));
+    assert_eq!(paper_success_rate("rule1/paper-margin2.5"), Some(78.0));
+    assert_eq!(paper_success_rate("povs/convolved"), Some(0.0));
+    for other in [
+        "",
+        "rule2/",
+        "/convolved",
+        "Rule2/convolved",
+        " rule2",
+        "rule2/ paper",
+        "rule2/paper/x",
+        "rule2/paper-margin",
+        "rule2-lm",
+        "rule2/lm",
+        "global",
+        "global/convolved",
+    ] {
+        assert_eq!(paper_success_rate(other), None, "`{other}`");
+    }
+    assert_eq!(
+        bench_conv::report::parse_config_name("rule1/paper"),
+        Some((
+            vvs::Method::Rule1,
+            Some(vvs::PgmJacobian::Paper { edge_margin: None })
+        ))
+    );
+}
+
+/// A desired pose is `looking_down = […]` or `pose = […]`, exactly one, nothing else.
+#[test]
+fn a_pose_is_looking_down_or_a_pose_vector() {
+    use bench_conv::protocol::PoseSpec;
+    #[derive(serde::Deserialize)]
+    struct File {
+        desired: Vec<PoseSpec>,
+    }
+    let parse = |text: &str| toml::from_str::<File>(text).map(|f| f.desired);
+    assert_eq!(
+        parse("[[desired]]\nlooking_down = [1.0, 2.0, 3.0, 90.0]\n").unwrap(),
+        [PoseSpec::LookingDown([1.0, 2.0, 3.0, 90.0])]
+    );
+    assert_eq!(
+        parse("[[desired]]\npose = [1.0, 2.0, 3.0, 0.0, 0.0, 0.5]\n").unwrap(),
+        [PoseSpec::Pose([1.0, 2.0, 3.0, 0.0, 0.0, 0.5])]
+    );
+    for (bad, expected) in [
+        (
+            "[[desired]]\nlooking_down = [1.0, 2.0, 3.0, 0.0]\npose = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]\n",
+            "exactly one",
+        ),
+        ("[[desired]]\n", "exactly one"),
+        (
+            "[[desired]]\nlooking_down = [1.0, 2.0, 3.0, 0.0]\nheading = 1.0\n",
+            "heading",
+        ),
+        ("[[desired]]\npose = [1.0]\n", "invalid length"),
+    ] {
+        let message = parse(bad).unwrap_err().to_string();
+        assert!(
+            message.contains(expected),
+            "expected `{expected}` in: {message}"
+        );
+    }
+    // The command line's `--pose` and `--looking-down` follow the same rule.
+    assert!(bench_conv::parse_pose(Some("1,2,3,0,0,0"), None).is_ok());
+    assert!(bench_conv::parse_pose(None, Some("1,2,3,0")).is_ok());
+    for (pose, looking_down) in [(None, None), (Some("1,2,3,0,0,0"), Some("1,2,3,0"))] {
+        let message = format!(
+            "{:#}",
+            bench_conv::parse_pose(pose, looking_down).unwrap_err()
+        );
+        assert!(message.contains("exactly one"), "{message}");
+    }
 }
 
 /// `axes` offsets move one component, `uniform` ones stay within the box and are

@@ -11,17 +11,8 @@ use splat::{RenderOptions, Renderer};
 use ucm::Isometry3;
 
 use super::run::{Benchmark, PoseCheckRecord, QueryKind, RealResults, RunRecord, TrackRecord};
+use crate::csv_io;
 use crate::report::write_atomically;
-
-/// Write a serialisable table as CSV, atomically.
-fn write_table<T: serde::Serialize>(path: &Path, rows: &[T]) -> anyhow::Result<()> {
-    let mut writer = csv::Writer::from_writer(Vec::new());
-    for row in rows {
-        writer.serialize(row)?;
-    }
-    let bytes = writer.into_inner().context("flushing the CSV")?;
-    write_atomically(path, &bytes)
-}
 
 fn median(mut values: Vec<f64>) -> f64 {
     if values.is_empty() {
@@ -329,7 +320,7 @@ pub fn write_results(
     let spec = &benchmark.spec;
     let records = &results.runs;
     let tracks = &results.tracks;
-    write_table(&out.join("runs.csv"), records)?;
+    csv_io::write_table(&out.join("runs.csv"), records)?;
     plot_errors(
         records,
         spec.success_m,
@@ -379,7 +370,7 @@ pub fn write_results(
         );
     }
     if !results.poses.is_empty() {
-        write_table(&out.join("poses.csv"), &results.poses)?;
+        csv_io::write_table(&out.join("poses.csv"), &results.poses)?;
         let _ = writeln!(
             text,
             "\n## The dataset's poses, by geometry alone\n\nEach query's depth picture aligned from its truth to the depth pictures of its cloud's nearest frames, each alone and all together (point-to-plane ICP, `rgbd::align_depth`; colour plays no part). *Correction*: how far the alignment moves the query's colour camera from its truth. Where a frame moves it by centimetres, that frame's pose and the query's disagree by as much, and a cloud fused with that frame places the query's surfaces elsewhere than its truth does (`poses.csv`).\n"
@@ -392,7 +383,7 @@ pub fn write_results(
         runs_table(&mut text, &runs, spec.success_m, spec.success_deg);
     }
     if !tracks.is_empty() {
-        write_table(&out.join("tracking.csv"), tracks)?;
+        csv_io::write_table(&out.join("tracking.csv"), tracks)?;
         plot_tracks(tracks, &out.join("tracking.png"), &out.join("tracking.svg"))?;
         let threshold = spec.tracking.as_ref().map_or(0.2, |t| t.lost_threshold_m);
         let _ = writeln!(
