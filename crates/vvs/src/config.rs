@@ -197,7 +197,7 @@ pub struct VvsConfig {
     /// Beyond the paper: the settings of [`Method::Global`].
     pub global: crate::GlobalConfig,
     /// Beyond the paper (off by default): estimate a radial vignetting of the desired
-    /// picture with the pose, as two more unknowns ([`crate::photometric`]).
+    /// picture with the pose, as two more unknowns ([`crate::vignetting`]).
     pub vignetting: bool,
     /// Keep the per-iteration history in the outcome.
     pub keep_history: bool,

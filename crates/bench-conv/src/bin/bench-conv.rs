@@ -37,7 +37,7 @@ enum Command {
         extras: bool,
     },
     /// Track a generated sequence by successive alignments (format:
-    /// crates/bench-conv/src/tracking.rs), the paper's §4.
+    /// crates/bench-conv/src/tracking/sequence.rs), the paper's §4.
     Track {
         /// Sequence file.
         sequence: PathBuf,
