@@ -391,7 +391,7 @@ impl VvsConfig {
 
     /// This configuration with the fields of `overrides` (a TOML table of
     /// [`VvsConfig`] fields, as in a protocol's or a sequence's `[vvs]`) replaced, then
-    /// validated: tables (`global`, `global.prior`) merge key by key, any other value
+    /// validated: a table (`global`) merges key by key, any other value
     /// replaces the field; fields the table does not name keep this configuration's
     /// values. The one way the project layers settings.
     pub fn with_overrides(&self, overrides: &toml::Table) -> Result<VvsConfig, VvsError> {

@@ -41,7 +41,7 @@ impl PriorBox {
     pub fn validate(&self) -> Result<(), VvsError> {
         let bad = |message: String| {
             Err(VvsError::Config {
-                name: "global.prior",
+                name: "prior",
                 message,
             })
         };
