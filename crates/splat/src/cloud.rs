@@ -196,67 +196,43 @@ impl PointCloud {
 
         // Cell key of every point, then a stable order: by cell, shuffled within.
         let inv = 1.0 / f64::from(cell_size_m);
-        let key = |p: &DVec3| {
-            let c = ((*p - origin) * inv).floor();
-            (c.x as i64, c.y as i64, c.z as i64)
-        };
-        // The shuffle's random keys: the generator's sequence, point by point.
-        const SHUFFLE_SEED: u64 = 0x5EED_CE11;
-        let mut order: Vec<(i64, i64, i64, u64, u32)> = positions
-            .par_iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let (x, y, z) = key(p);
-                (
-                    x,
-                    y,
-                    z,
-                    SplitMix64::nth_value(SHUFFLE_SEED, i as u64),
-                    i as u32,
-                )
-            })
-            .collect();
-        // Every key holds the point's index, so any sort gives the same order: sorted
-        // on rayon's threads.
-        order.par_sort_unstable();
+        let key = |p: &DVec3| ((*p - origin) * inv).to_array().map(floor_to_i64);
+        let Layout {
+            order,
+            cell_keys,
+            starts,
+        } = Layout::new(positions, &key);
 
         // Each point rounded to a step of its cell (clamped: the cell's key was floored
         // in f64), in that order.
         let cell_m = f64::from(cell_size_m);
         let step_m = cell_m / STEPS;
-        let cell_of = |o: &(i64, i64, i64, u64, u32)| (o.0, o.1, o.2);
-        let corner_of =
-            |o: &(i64, i64, i64, u64, u32)| DVec3::new(o.0 as f64, o.1 as f64, o.2 as f64) * cell_m;
-        let points: Vec<PackedPoint> = order
-            .par_iter()
-            .map(|o| {
-                let i = o.4 as usize;
-                let steps = ((positions[i] - origin - corner_of(o)) / step_m)
-                    .round()
-                    .clamp(DVec3::ZERO, DVec3::splat(STEPS));
-                PackedPoint {
-                    steps: steps.to_array().map(|s| s as u16),
-                    intensity: fixed_intensity(intensities[i]),
-                }
-            })
-            .collect();
-        let sorted_colors = colors.as_ref().map(|c| {
-            order
-                .par_iter()
-                .map(|o| c[o.4 as usize])
-                .collect::<Vec<_>>()
-        });
-        // The cells: runs of one key.
-        let starts: Vec<usize> = (0..n)
+        let corner_of = |k: &[i64; 3]| DVec3::new(k[0] as f64, k[1] as f64, k[2] as f64) * cell_m;
+        let end_of = |c: usize| starts.get(c + 1).copied().unwrap_or(n);
+        let mut points = vec![PackedPoint::default(); n];
+        split_by_cell(&mut points, &starts)
             .into_par_iter()
-            .filter(|&i| i == 0 || cell_of(&order[i]) != cell_of(&order[i - 1]))
-            .collect();
+            .enumerate()
+            .for_each(|(c, cell_points)| {
+                let corner = corner_of(&cell_keys[c]);
+                for (point, &i) in cell_points.iter_mut().zip(&order[starts[c]..end_of(c)]) {
+                    let i = i as usize;
+                    let steps = (positions[i] - origin - corner) / step_m;
+                    *point = PackedPoint {
+                        steps: steps.to_array().map(nearest_step),
+                        intensity: fixed_intensity(intensities[i]),
+                    };
+                }
+            });
+        let sorted_colors = colors
+            .as_ref()
+            .map(|c| order.par_iter().map(|&i| c[i as usize]).collect::<Vec<_>>());
         let cells_and_bounds: Vec<(Cell, DVec3, DVec3)> = starts
             .par_iter()
             .enumerate()
             .map(|(c, &start)| {
-                let end = starts.get(c + 1).copied().unwrap_or(n);
-                let corner = corner_of(&order[start]);
+                let end = end_of(c);
+                let corner = corner_of(&cell_keys[c]);
                 let mut lo = DVec3::splat(f64::INFINITY);
                 let mut hi = DVec3::splat(f64::NEG_INFINITY);
                 for point in &points[start..end] {
@@ -436,4 +412,282 @@ impl PointCloud {
 /// rounds it (`⌊65535 i + 0.5⌋` in `f32`).
 fn fixed_intensity(intensity: f32) -> u16 {
     (intensity.clamp(0.0, 1.0) * 65535.0 + 0.5) as u16
+}
+
+/// The points' order in a cloud: by cell (cells in the order of their integer
+/// coordinates x, then y, then z) and, within a cell, by a random key drawn from the
+/// point's index (ties, which a 64-bit key all but never has, by the index).
+struct Layout {
+    /// Input index of each point, in the cloud's order.
+    order: Vec<u32>,
+    /// Integer coordinates of each cell, in order.
+    cell_keys: Vec<[i64; 3]>,
+    /// First point of each cell in `order`.
+    starts: Vec<usize>,
+}
+
+/// The shuffle's random keys: the generator's sequence, point by point.
+const SHUFFLE_SEED: u64 = 0x5EED_CE11;
+
+/// A grid of at most this many cells per point (or 2²⁰ cells) is laid out by counting;
+/// a sparser one by sorting (the same order).
+const DENSE_CELLS_PER_POINT: usize = 4;
+
+impl Layout {
+    fn new(positions: &[DVec3], key: &(impl Fn(&DVec3) -> [i64; 3] + Sync)) -> Self {
+        let n = positions.len();
+        let (lo, hi) = positions
+            .par_iter()
+            .map(|p| {
+                let k = key(p);
+                (k, k)
+            })
+            .reduce(
+                || ([i64::MAX; 3], [i64::MIN; 3]),
+                |(lo, hi), (l, h)| {
+                    (
+                        std::array::from_fn(|a| lo[a].min(l[a])),
+                        std::array::from_fn(|a| hi[a].max(h[a])),
+                    )
+                },
+            );
+        // Cells of the bounding grid, if few enough to count.
+        let dims: [usize; 3] = std::array::from_fn(|a| {
+            usize::try_from(hi[a].saturating_sub(lo[a]))
+                .unwrap_or(usize::MAX)
+                .saturating_add(1)
+        });
+        let grid = dims[0]
+            .checked_mul(dims[1])
+            .and_then(|c| c.checked_mul(dims[2]))
+            .filter(|&c| c <= (DENSE_CELLS_PER_POINT * n).max(1 << 20) && c <= u32::MAX as usize);
+        match grid {
+            Some(cells) => Self::counted(positions, key, lo, dims, cells),
+            None => Self::sorted(positions, key),
+        }
+    }
+
+    /// By sorting every point's (cell, random key, index).
+    fn sorted(positions: &[DVec3], key: &(impl Fn(&DVec3) -> [i64; 3] + Sync)) -> Self {
+        let mut keyed: Vec<([i64; 3], u64, u32)> = positions
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| {
+                (
+                    key(p),
+                    SplitMix64::nth_value(SHUFFLE_SEED, i as u64),
+                    i as u32,
+                )
+            })
+            .collect();
+        // Every key holds the point's index, so any sort gives the same order: sorted
+        // on rayon's threads.
+        keyed.par_sort_unstable();
+        let starts: Vec<usize> = (0..keyed.len())
+            .into_par_iter()
+            .filter(|&i| i == 0 || keyed[i].0 != keyed[i - 1].0)
+            .collect();
+        Self {
+            cell_keys: starts.iter().map(|&s| keyed[s].0).collect(),
+            order: keyed.into_iter().map(|(.., i)| i).collect(),
+            starts,
+        }
+    }
+
+    /// By counting the points of each cell of the bounding grid (`cells` of them,
+    /// `dims` along x, y, z from `lo`), placing them, then sorting each cell by its
+    /// random keys.
+    fn counted(
+        positions: &[DVec3],
+        key: &(impl Fn(&DVec3) -> [i64; 3] + Sync),
+        lo: [i64; 3],
+        dims: [usize; 3],
+        cells: usize,
+    ) -> Self {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        let n = positions.len();
+        // The grid cell of each point: x, then y, then z, as the cells are ordered.
+        let linear: Vec<u32> = positions
+            .par_iter()
+            .map(|p| {
+                let k = key(p);
+                let [x, y, z] = std::array::from_fn(|a| (k[a] - lo[a]) as usize);
+                ((x * dims[1] + y) * dims[2] + z) as u32
+            })
+            .collect();
+        let counts: Vec<AtomicU32> = (0..cells).map(|_| AtomicU32::new(0)).collect();
+        linear.par_iter().for_each(|&c| {
+            counts[c as usize].fetch_add(1, Ordering::Relaxed);
+        });
+        // The occupied cells, their keys and first points; `next` becomes each grid
+        // cell's next free slot.
+        let mut next: Vec<u32> = counts.into_iter().map(AtomicU32::into_inner).collect();
+        let (mut starts, mut cell_keys) = (Vec::new(), Vec::new());
+        let mut start = 0u32;
+        for (c, slot) in next.iter_mut().enumerate() {
+            let count = *slot;
+            if count > 0 {
+                starts.push(start as usize);
+                let (x, y, z) = (c / (dims[1] * dims[2]), c / dims[2] % dims[1], c % dims[2]);
+                cell_keys.push([lo[0] + x as i64, lo[1] + y as i64, lo[2] + z as i64]);
+            }
+            *slot = start;
+            start += count;
+        }
+        let mut keyed = vec![(0u64, 0u32); n];
+        for (i, &c) in linear.iter().enumerate() {
+            let slot = &mut next[c as usize];
+            keyed[*slot as usize] = (SplitMix64::nth_value(SHUFFLE_SEED, i as u64), i as u32);
+            *slot += 1;
+        }
+        drop(linear);
+        split_by_cell(&mut keyed, &starts)
+            .into_par_iter()
+            .for_each_init(
+                || (Vec::new(), Vec::new()),
+                |(scratch, counts), cell| sort_random_keys(cell, scratch, counts),
+            );
+        Self {
+            order: keyed.into_iter().map(|(_, i)| i).collect(),
+            cell_keys,
+            starts,
+        }
+    }
+}
+
+/// `items` cut into the runs that begin at `starts` (increasing, the first 0).
+fn split_by_cell<'a, T>(mut items: &'a mut [T], starts: &[usize]) -> Vec<&'a mut [T]> {
+    let mut runs = Vec::with_capacity(starts.len());
+    for (c, &start) in starts.iter().enumerate() {
+        let len = starts.get(c + 1).map_or(items.len(), |&next| next - start);
+        let (run, rest) = items.split_at_mut(len);
+        runs.push(run);
+        items = rest;
+    }
+    runs
+}
+
+/// `⌊x⌋` of a finite `x` of magnitude below 2⁶³ (the positions were checked), without
+/// a call to the C library where the target has no rounding instruction.
+#[inline(always)]
+fn floor_to_i64(x: f64) -> i64 {
+    let t = x as i64; // toward zero
+    if t as f64 > x { t - 1 } else { t }
+}
+
+/// The step nearest `x` (halves away from zero, as `f64::round`), clamped to
+/// `[0, 65 535]`.
+#[inline(always)]
+fn nearest_step(x: f64) -> u16 {
+    // Rounding commutes with a clamp to integers.
+    let x = x.clamp(0.0, STEPS);
+    let t = x as u32; // x ≥ 0: the floor
+    (if x - f64::from(t) >= 0.5 { t + 1 } else { t }) as u16
+}
+
+/// Sort a cell's (random key, index) pairs: by the keys' leading bits into about one
+/// bucket per pair (the keys are uniform), then by insertion within buckets. The order
+/// of `sort_unstable`, in linear time.
+fn sort_random_keys(cell: &mut [(u64, u32)], scratch: &mut Vec<(u64, u32)>, counts: &mut Vec<u32>) {
+    let m = cell.len();
+    if m <= 32 {
+        cell.sort_unstable();
+        return;
+    }
+    let bits = usize::BITS - (m - 1).leading_zeros();
+    let shift = 64 - bits;
+    counts.clear();
+    counts.resize((1 << bits) + 1, 0);
+    for &(key, _) in cell.iter() {
+        counts[(key >> shift) as usize + 1] += 1;
+    }
+    for b in 1..counts.len() {
+        counts[b] += counts[b - 1];
+    }
+    scratch.clear();
+    scratch.resize(m, (0, 0));
+    for &pair in cell.iter() {
+        let slot = &mut counts[(pair.0 >> shift) as usize];
+        scratch[*slot as usize] = pair;
+        *slot += 1;
+    }
+    cell.copy_from_slice(scratch);
+    // Pairs of different buckets are in order: only a bucket's few pairs move.
+    for i in 1..m {
+        let pair = cell[i];
+        let mut j = i;
+        while j > 0 && cell[j - 1] > pair {
+            cell[j] = cell[j - 1];
+            j -= 1;
+        }
+        cell[j] = pair;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The layout's fast paths against the plain ones.
+
+    use proptest::prelude::*;
+
+    use super::*;
+
+    proptest! {
+        /// Counting the points of each cell gives the order of sorting them, on grids
+        /// of one cell to many, with points on cell boundaries and repeated points.
+        #[test]
+        fn counting_lays_out_as_sorting(
+            points in prop::collection::vec(
+                (prop::array::uniform3(-40i32..40), prop::array::uniform3(0u8..4)),
+                1..3000,
+            ),
+            cell_m in prop::sample::select(vec![0.25f64, 1.0, 2.0, 7.5]),
+        ) {
+            // Quarter steps: many points exactly on a boundary.
+            let positions: Vec<DVec3> = points
+                .iter()
+                .map(|(m, q)| DVec3::new(
+                    f64::from(m[0]) + f64::from(q[0]) * 0.25,
+                    f64::from(m[1]) + f64::from(q[1]) * 0.25,
+                    f64::from(m[2]) + f64::from(q[2]) * 0.25,
+                ))
+                .collect();
+            let origin = DVec3::new(-3.0, 0.5, 1.0);
+            let key = |p: &DVec3| ((*p - origin) / cell_m).to_array().map(floor_to_i64);
+            let sorted = Layout::sorted(&positions, &key);
+            let counted = Layout::new(&positions, &key);
+            prop_assert_eq!(&counted.order, &sorted.order);
+            prop_assert_eq!(&counted.cell_keys, &sorted.cell_keys);
+            prop_assert_eq!(&counted.starts, &sorted.starts);
+            for p in &positions {
+                let floored = ((*p - origin) / cell_m).floor();
+                prop_assert_eq!(key(p), [floored.x as i64, floored.y as i64, floored.z as i64]);
+            }
+        }
+
+        /// The rounding helpers are `floor` and `round` (then clamped).
+        #[test]
+        fn rounding_helpers_match_the_library(x in -1e9f64..1e9, y in -10.0f64..70_000.0) {
+            prop_assert_eq!(floor_to_i64(x), x.floor() as i64);
+            prop_assert_eq!(nearest_step(y), y.round().clamp(0.0, STEPS) as u16);
+            let half = y.floor() + 0.5;
+            prop_assert_eq!(nearest_step(half), half.round().clamp(0.0, STEPS) as u16);
+        }
+    }
+
+    /// A sparse grid (two far clusters) takes the sorting path and a dense one the
+    /// counting path; both give every point once.
+    #[test]
+    fn sparse_and_dense_grids_are_both_laid_out() {
+        let mut positions: Vec<DVec3> = (0..500)
+            .map(|i| DVec3::splat(f64::from(i) * 0.01))
+            .collect();
+        positions.extend((0..500).map(|i| DVec3::splat(9.0e5 + f64::from(i) * 0.01)));
+        let key = |p: &DVec3| (*p * 10.0).to_array().map(floor_to_i64);
+        let layout = Layout::new(&positions, &key);
+        let mut seen = layout.order.clone();
+        seen.sort_unstable();
+        assert_eq!(seen, (0..1000).collect::<Vec<u32>>());
+        assert_eq!(layout.order, Layout::sorted(&positions, &key).order);
+    }
 }
