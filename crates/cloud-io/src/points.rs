@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use glam::DVec3;
+use rayon::prelude::*;
 use splat::PointCloud;
 
 use crate::CloudIoError;
@@ -122,8 +123,9 @@ impl Points {
         }
         let origin = self
             .positions_m
-            .iter()
-            .fold(DVec3::splat(f64::INFINITY), |m, p| m.min(*p))
+            .par_iter()
+            .copied()
+            .reduce(|| DVec3::splat(f64::INFINITY), DVec3::min)
             .floor();
         let origin = if origin.is_finite() {
             origin
@@ -134,10 +136,10 @@ impl Points {
             (Some(colors), _) => {
                 let rgb: Vec<[u8; 3]> = colors
                     .values
-                    .iter()
+                    .par_iter()
                     .map(|c| c.map(|v| colors.scale.to_u8(v)))
                     .collect();
-                let intensities = rgb.iter().map(|&c| splat::luminance(c)).collect();
+                let intensities = rgb.par_iter().map(|&c| splat::luminance(c)).collect();
                 (intensities, Some(rgb), IntensitySource::Color(colors.scale))
             }
             (None, Some(raw)) => {

@@ -158,7 +158,7 @@ impl PointCloud {
             });
         }
         // The first bad point, found on rayon's threads.
-        let bad_point = positions.par_iter().position_first(|p| {
+        let bad_point = first_index(positions, |p| {
             !(p.is_finite() && (*p - origin).abs().max_element() <= MAX_OFFSET_M)
         });
         if let Some(index) = bad_point {
@@ -179,7 +179,7 @@ impl PointCloud {
                 ),
             });
         }
-        if let Some(index) = intensities.iter().position(|i| !i.is_finite()) {
+        if let Some(index) = first_index(intensities, |i| !i.is_finite()) {
             return Err(SplatError::Parameter {
                 name: "intensities",
                 message: format!("intensity of point {index} is {}", intensities[index]),
@@ -283,30 +283,38 @@ impl PointCloud {
     /// within their cell).
     fn estimate_spacing(&self) -> f32 {
         let mut rng = SplitMix64::new(17);
-        let mut distances = Vec::new();
         let cells: Vec<&Cell> = self.cells.iter().filter(|c| c.len > 1).collect();
         if cells.is_empty() {
             return self.cell_size_m * 0.5;
         }
-        for _ in 0..2000 {
-            let cell = cells[rng.below(cells.len() as u64) as usize];
-            let range = cell.start as usize..(cell.start + cell.len.min(4096)) as usize;
-            let pts = &self.points[range];
-            let a = pts[rng.below(pts.len() as u64) as usize].steps;
-            // Squared distances in steps (exact integers).
-            let best = pts
-                .iter()
-                .map(|b| {
-                    (0..3)
-                        .map(|k| (i64::from(a[k]) - i64::from(b.steps[k])).pow(2))
-                        .sum::<i64>()
-                })
-                .filter(|&d| d > 0)
-                .min();
-            if let Some(best) = best {
-                distances.push(((best as f64).sqrt() * self.step_m) as f32);
-            }
-        }
+        // The sample drawn first (the generator's order), the searches on rayon's
+        // threads.
+        let samples: Vec<(&Cell, u64)> = (0..2000)
+            .map(|_| {
+                let cell = cells[rng.below(cells.len() as u64) as usize];
+                let point = rng.below(u64::from(cell.len.min(4096)));
+                (cell, point)
+            })
+            .collect();
+        let mut distances: Vec<f32> = samples
+            .par_iter()
+            .filter_map(|&(cell, point)| {
+                let range = cell.start as usize..(cell.start + cell.len.min(4096)) as usize;
+                let pts = &self.points[range];
+                let a = pts[point as usize].steps;
+                // Squared distances in steps (exact integers).
+                let best = pts
+                    .iter()
+                    .map(|b| {
+                        (0..3)
+                            .map(|k| (i64::from(a[k]) - i64::from(b.steps[k])).pow(2))
+                            .sum::<i64>()
+                    })
+                    .filter(|&d| d > 0)
+                    .min()?;
+                Some(((best as f64).sqrt() * self.step_m) as f32)
+            })
+            .collect();
         if distances.is_empty() {
             return self.cell_size_m * 0.5;
         }
@@ -567,6 +575,16 @@ fn split_by_cell<'a, T>(mut items: &'a mut [T], starts: &[usize]) -> Vec<&'a mut
     runs
 }
 
+/// The index of the first item of `items` for which `test` holds, runs of items on
+/// rayon's threads (`position_first` item by item consults the other threads at each).
+fn first_index<T: Sync>(items: &[T], test: impl Fn(&T) -> bool + Sync) -> Option<usize> {
+    const RUN: usize = 1 << 16;
+    items
+        .par_chunks(RUN)
+        .enumerate()
+        .find_map_first(|(k, run)| run.iter().position(&test).map(|i| k * RUN + i))
+}
+
 /// `⌊x⌋` of a finite `x` of magnitude below 2⁶³ (the positions were checked), without
 /// a call to the C library where the target has no rounding instruction.
 #[inline(always)]
@@ -672,6 +690,17 @@ mod tests {
             prop_assert_eq!(nearest_step(y), y.round().clamp(0.0, STEPS) as u16);
             let half = y.floor() + 0.5;
             prop_assert_eq!(nearest_step(half), half.round().clamp(0.0, STEPS) as u16);
+        }
+    }
+
+    /// The first matching item is found whichever runs of items the threads take.
+    #[test]
+    fn first_index_is_the_first() {
+        let mut items = vec![0u8; 300_000];
+        assert_eq!(first_index(&items, |&v| v != 0), None);
+        for &k in &[250_000usize, 70_000, 65_536, 65_535, 3] {
+            items[k] = 1;
+            assert_eq!(first_index(&items, |&v| v != 0), Some(k));
         }
     }
 
