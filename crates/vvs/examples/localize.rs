@@ -163,8 +163,8 @@ fn main() -> anyhow::Result<()> {
     if let Some(search) = &o.search {
         let [screening, descents, refinement] = search.phase_times_s;
         println!(
-            "search: {} candidates ({screening:.1} s), {} descents ({descents:.1} s), {} refinements ({refinement:.1} s)",
-            search.candidates, search.descents, search.refinements
+            "search: {} candidates ({screening:.1} s), {} descents, {} run on ({descents:.1} s), {} refinements ({refinement:.1} s)",
+            search.candidates, search.descents, search.continued, search.refinements
         );
     }
     let r = o.world_from_camera.to_pose_vector();

@@ -120,6 +120,10 @@ fn global_settings_are_validated() {
     let mut config = VvsConfig::default();
     config.global.search_downsampling = 64;
     assert!(config.validate().is_err());
+    let mut config = VvsConfig::default();
+    config.global.pruned_to = 0;
+    let message = config.validate().unwrap_err().to_string();
+    assert!(message.contains("pruned_to"), "{message}");
     // A lying box and a λ*₁ too small for the search's resolution: fine for Rule2,
     // refused by the search.
     let config = VvsConfig {
@@ -194,6 +198,28 @@ fn global_converges_from_the_corner_of_the_box() {
     );
 }
 
+/// Pruned descents (every candidate 3 iterations, the 10 best on to 10) find the pose
+/// from the corner of the box too, in fewer iterations than descents run whole.
+#[test]
+fn pruned_descents_find_the_pose_in_fewer_iterations() {
+    let mut config = VvsConfig::default();
+    config.global.prune_after_iterations = 3;
+    config.global.pruned_to = 10;
+    let (mut servo, desired) = servo_with(config);
+    let outcome = servo
+        .localize_in_box(&desired, offset(PAPER_CORNER), &PriorBox::default())
+        .unwrap();
+    let (dt, dr) = outcome.world_from_camera.distance_to(&desired_pose());
+    assert!(dt < 0.02 && dr.to_degrees() < 0.5, "{dt} m, {dr} rad");
+    let search = outcome.search.unwrap();
+    assert_eq!(search.descents, 20);
+    assert!(search.continued > 0 && search.continued <= 10, "{search:?}");
+    assert!(
+        search.descent_iterations <= 20 * 3 + search.continued * 7,
+        "{search:?}"
+    );
+}
+
 /// The global search is run where its box is given, once: the calls of the local
 /// methods refuse it with a typed error, and so does a localiser without a box; a
 /// localiser with one gives what the search gives.
@@ -249,18 +275,28 @@ fn global_reports_its_progress_phase_by_phase() {
         translation_m: [1.0, 0.5, 0.3],
         rotation_deg: [2.0; 3],
     };
-    let (mut servo, desired) = servo_with(VvsConfig::default());
+    // Pruned descents too: the descents' phase counts those that run on.
+    let mut pruned = VvsConfig::default();
+    pruned.global.prune_after_iterations = 3;
+    pruned.global.pruned_to = 6;
+    for config in [VvsConfig::default(), pruned] {
+        progress_phase_by_phase(config, &prior);
+    }
+}
+
+fn progress_phase_by_phase(config: VvsConfig, prior: &PriorBox) {
+    let (mut servo, desired) = servo_with(config);
     let start = offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]);
     let mut events = Vec::new();
     let outcome = servo
-        .localize_in_box_with_progress(&desired, start, &prior, &mut |p| events.push(p))
+        .localize_in_box_with_progress(&desired, start, prior, &mut |p| events.push(p))
         .unwrap();
-    let alone = servo.localize_in_box(&desired, start, &prior).unwrap();
+    let alone = servo.localize_in_box(&desired, start, prior).unwrap();
     assert_eq!(outcome.world_from_camera, alone.world_from_camera);
     let search = outcome.search.unwrap();
     let phases = [
         (SearchPhase::Screening, search.candidates),
-        (SearchPhase::Descents, search.descents),
+        (SearchPhase::Descents, search.descents + search.continued),
         (SearchPhase::Refinements, search.refinements),
     ];
     let mut at = 0;

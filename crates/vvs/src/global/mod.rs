@@ -26,7 +26,10 @@
 //!    [`turned`]); a tilt leaves part of the field unobserved, and only the samples
 //!    farther than 2λ from it are compared. The [`GlobalConfig::screened`] best
 //!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
-//!    and are ranked again by their cost; descents that end outside the box (grown by
+//!    and are ranked again by their cost (with [`GlobalConfig::prune_after_iterations`],
+//!    every descent first runs that many iterations and only the
+//!    [`GlobalConfig::pruned_to`] best run on: the `Localizer`'s default, 3 then the 10
+//!    best, measured in `docs/RESULTS.md`); descents that end outside the box (grown by
 //!    a grid spacing and [`BOX_MARGIN_DEG`], [`PriorBox::holds`]) are dropped, and those
 //!    that end within [`GlobalConfig::merge_distance_m`] of a better one as duplicates.
 //! 3. **Refinement.** The [`GlobalConfig::refined`] best run
@@ -91,6 +94,13 @@ pub struct GlobalConfig {
     pub screened: usize,
     /// Iterations of each low-resolution descent.
     pub descent_iterations: usize,
+    /// Beyond the first searches (0: off): every descent first runs this many
+    /// iterations, then only the [`GlobalConfig::pruned_to`] best, ranked as the
+    /// descents are at their end, run on to [`GlobalConfig::descent_iterations`] (λ
+    /// where it was); the others are dropped.
+    pub prune_after_iterations: usize,
+    /// Descents that run on after [`GlobalConfig::prune_after_iterations`].
+    pub pruned_to: usize,
     /// Descents ending this close to a better one are duplicates (metres).
     pub merge_distance_m: f64,
     /// Descents refined at full resolution.
@@ -108,6 +118,8 @@ impl Default for GlobalConfig {
             search_downsampling: 4,
             screened: 20,
             descent_iterations: 10,
+            prune_after_iterations: 0,
+            pruned_to: 10,
             merge_distance_m: 0.5,
             refined: 1,
             refine_method: Method::Rule2,
@@ -159,6 +171,7 @@ impl GlobalConfig {
             ("global.screened", self.screened),
             ("global.descent_iterations", self.descent_iterations),
             ("global.refined", self.refined),
+            ("global.pruned_to", self.pruned_to),
         ] {
             if v == 0 {
                 return bad(name, "must be >= 1".into());
@@ -184,6 +197,9 @@ pub struct SearchReport {
     pub candidates: usize,
     /// Low-resolution descents run.
     pub descents: usize,
+    /// Descents that ran on after [`GlobalConfig::prune_after_iterations`] (0 without
+    /// pruning).
+    pub continued: usize,
     /// Full-resolution refinements run.
     pub refinements: usize,
     /// Iterations of every low-resolution descent together.

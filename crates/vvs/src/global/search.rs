@@ -13,11 +13,22 @@ use super::{
     BOX_MARGIN_DEG, GlobalConfig, MAX_CANDIDATES, PriorBox, SearchPhase, SearchProgress,
     SearchReport, turned, turned_about_optical_axis,
 };
-use crate::servo::{Level, Planned, Stage, outside};
+use crate::servo::{Level, Planned, Stage, StageResult, outside};
 use crate::{Outcome, Servo, StopReason, Support, VvsError};
 
 /// A candidate: its score, its node and its orientation (indices).
 type Candidate = (f64, usize, usize);
+
+/// A low-resolution descent of a screened candidate, as it stands.
+struct Descent {
+    /// The node and orientation it started from.
+    candidate: (usize, usize),
+    pose: Isometry3,
+    coefficients: [f64; 2],
+    result: StageResult,
+    /// Its rank (lower is better, [`Servo::descent_rank`]).
+    rank: f64,
+}
 
 /// The desired picture as every orientation of the search sees it: at each node the
 /// rendering is compared with each (a central camera turned about its centre sees the
@@ -142,46 +153,112 @@ impl<'a> Servo<'a> {
             stall_window: self.config.stall_window,
         };
         let identity = angles.iter().position(|o| *o == [0.0; 3]);
-        let mut descended: Vec<(f64, (usize, usize), Isometry3)> =
-            Vec::with_capacity(screened.len());
+        // With pruning, every descent first runs `first` iterations, then the best
+        // run on from where they stopped.
+        let pruning = settings.prune_after_iterations > 0
+            && settings.prune_after_iterations < settings.descent_iterations;
+        let first = if pruning {
+            settings.prune_after_iterations
+        } else {
+            settings.descent_iterations
+        };
+        let continued = if pruning {
+            settings.pruned_to.min(screened.len())
+        } else {
+            0
+        };
+        let total = screened.len() + continued;
+        let mut descents: Vec<Descent> = Vec::with_capacity(screened.len());
+        let mut descents_continued = 0;
         let mut descent_iterations = 0;
         let mut history = Vec::new();
         for (done, &(_, index, orientation)) in screened.iter().enumerate() {
-            report(SearchPhase::Descents, done, screened.len());
+            report(SearchPhase::Descents, done, total);
             let mut pose = node_pose(index, orientation);
             history.clear();
             let mut coefficients = self.vignetting_start;
             let result = self.run_stage(
-                planned,
-                settings.descent_iterations,
+                Planned {
+                    cap: first,
+                    ..planned
+                },
+                first,
                 &desired_small,
                 &mut pose,
                 &mut coefficients,
                 &mut history,
             )?;
             descent_iterations += result.iterations;
-            // On the common support the descents are ranked by the screening's score
-            // at their end (the unturned picture), not by their costs: those compare
-            // pictures normalised over supports of different shapes.
-            let rank = match (common, identity) {
-                (true, Some(identity)) => {
-                    self.search_cost(search, &pose, lambda, &mut orientations)?;
-                    orientations.costs[identity]
-                }
-                _ => result.cost,
-            };
+            let rank =
+                self.descent_rank(search, identity, &pose, lambda, &result, &mut orientations)?;
+            descents.push(Descent {
+                candidate: (index, orientation),
+                pose,
+                coefficients,
+                result,
+                rank,
+            });
+        }
+        if pruning {
+            // The best by rank run on (a diverged descent or an infinite rank never).
+            descents.retain(|d| {
+                !matches!(d.result.stop, StopReason::Diverged(_)) && d.rank.is_finite()
+            });
+            descents.sort_by(|a, b| {
+                a.rank
+                    .total_cmp(&b.rank)
+                    .then(a.candidate.cmp(&b.candidate))
+            });
+            descents.truncate(continued);
+            descents_continued = descents.len();
+            let remaining = settings.descent_iterations - first;
+            for (done, d) in descents.iter_mut().enumerate() {
+                report(SearchPhase::Descents, screened.len() + done, total);
+                history.clear();
+                let on = Planned {
+                    stage: Stage::Pgm {
+                        lambda_star: lambda,
+                        lambda_start: d.result.lambda,
+                        optimise_lambda: true,
+                    },
+                    cap: remaining,
+                    ..planned
+                };
+                let result = self.run_stage(
+                    on,
+                    remaining,
+                    &desired_small,
+                    &mut d.pose,
+                    &mut d.coefficients,
+                    &mut history,
+                )?;
+                descent_iterations += result.iterations;
+                d.rank = self.descent_rank(
+                    search,
+                    identity,
+                    &d.pose,
+                    lambda,
+                    &result,
+                    &mut orientations,
+                )?;
+                d.result = result;
+            }
+        }
+        let mut descended: Vec<(f64, (usize, usize), Isometry3)> =
+            Vec::with_capacity(descents.len());
+        for d in descents {
             // A descent that left the box (grown by a grid spacing and a few degrees)
             // found something else than the truth the box holds.
-            let in_box = prior.holds(&initial, &pose, settings.grid_spacing_m, BOX_MARGIN_DEG);
-            if !matches!(result.stop, StopReason::Diverged(_)) && rank.is_finite() && in_box {
-                descended.push((rank, (index, orientation), pose));
+            let in_box = prior.holds(&initial, &d.pose, settings.grid_spacing_m, BOX_MARGIN_DEG);
+            if !matches!(d.result.stop, StopReason::Diverged(_)) && d.rank.is_finite() && in_box {
+                descended.push((d.rank, d.candidate, d.pose));
             }
         }
         let kept = distinct_best(descended, &settings, initial);
         let descents_s = started.elapsed().as_secs_f64() - screening_s;
 
         // Refinements at full resolution: the lowest final cost wins.
-        report(SearchPhase::Descents, screened.len(), screened.len());
+        report(SearchPhase::Descents, total, total);
         let mut best: Option<(usize, Outcome)> = None;
         let mut refined_costs = Vec::with_capacity(kept.len());
         for (rank, &(_, pose)) in kept.iter().enumerate() {
@@ -209,6 +286,7 @@ impl<'a> Servo<'a> {
         outcome.search = Some(SearchReport {
             candidates: nodes.len() * angles.len(),
             descents: screened.len(),
+            continued: if pruning { descents_continued } else { 0 },
             refinements: kept.len(),
             descent_iterations,
             chosen_node_m,
@@ -222,6 +300,28 @@ impl<'a> Servo<'a> {
             ],
         });
         Ok(outcome)
+    }
+
+    /// How a descent ending at `pose` with `result` ranks (lower is better): on the
+    /// common support by the screening's score at its end (the unturned picture), not
+    /// by its cost (costs compare pictures normalised over supports of different
+    /// shapes); otherwise by its cost.
+    fn descent_rank(
+        &mut self,
+        search: usize,
+        identity: Option<usize>,
+        pose: &Isometry3,
+        lambda: f32,
+        result: &StageResult,
+        orientations: &mut Orientations,
+    ) -> Result<f64, VvsError> {
+        match (self.config.support == Support::Common, identity) {
+            (true, Some(identity)) => {
+                self.search_cost(search, pose, lambda, orientations)?;
+                Ok(orientations.costs[identity])
+            }
+            _ => Ok(result.cost),
+        }
     }
 
     /// The index of the global search's low-resolution level, built on first use.

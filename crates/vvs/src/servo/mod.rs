@@ -14,7 +14,7 @@ use splat::PointCloud;
 use ucm::{Camera, Isometry3};
 
 pub(crate) use level::Level;
-pub(crate) use stage::{Planned, Stage, outside};
+pub(crate) use stage::{Planned, Stage, StageResult, outside};
 
 use crate::vignetting::MAX_COEFFICIENT;
 use crate::{Method, Outcome, StopReason, VvsConfig, VvsError};
