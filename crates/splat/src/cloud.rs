@@ -459,18 +459,8 @@ impl Layout {
                     )
                 },
             );
-        // Cells of the bounding grid, if few enough to count.
-        let dims: [usize; 3] = std::array::from_fn(|a| {
-            usize::try_from(hi[a].saturating_sub(lo[a]))
-                .unwrap_or(usize::MAX)
-                .saturating_add(1)
-        });
-        let grid = dims[0]
-            .checked_mul(dims[1])
-            .and_then(|c| c.checked_mul(dims[2]))
-            .filter(|&c| c <= (DENSE_CELLS_PER_POINT * n).max(1 << 20) && c <= u32::MAX as usize);
-        match grid {
-            Some(cells) => Self::counted(positions, key, lo, dims, cells),
+        match dense_grid(lo, hi, n) {
+            Some((dims, cells)) => Self::counted(positions, key, lo, dims, cells),
             None => Self::sorted(positions, key),
         }
     }
@@ -563,6 +553,23 @@ impl Layout {
     }
 }
 
+/// The dimensions and number of cells of the grid from cell `lo` to cell `hi` (the
+/// points' smallest and largest cell coordinates), if `n` points may be laid out by
+/// counting its cells (at most [`DENSE_CELLS_PER_POINT`] cells per point, or 2²⁰, and
+/// at most `u32::MAX`).
+fn dense_grid(lo: [i64; 3], hi: [i64; 3], n: usize) -> Option<([usize; 3], usize)> {
+    let dims: [usize; 3] = std::array::from_fn(|a| {
+        usize::try_from(hi[a].saturating_sub(lo[a]))
+            .unwrap_or(usize::MAX)
+            .saturating_add(1)
+    });
+    let cells = dims[0]
+        .checked_mul(dims[1])
+        .and_then(|c| c.checked_mul(dims[2]))
+        .filter(|&c| c <= (DENSE_CELLS_PER_POINT * n).max(1 << 20) && c <= u32::MAX as usize)?;
+    Some((dims, cells))
+}
+
 /// `items` cut into the runs that begin at `starts` (increasing, the first 0).
 fn split_by_cell<'a, T>(mut items: &'a mut [T], starts: &[usize]) -> Vec<&'a mut [T]> {
     let mut runs = Vec::with_capacity(starts.len());
@@ -604,8 +611,8 @@ fn nearest_step(x: f64) -> u16 {
 }
 
 /// Sort a cell's (random key, index) pairs: by the keys' leading bits into about one
-/// bucket per pair (the keys are uniform), then by insertion within buckets. The order
-/// of `sort_unstable`, in linear time.
+/// bucket per pair, then each bucket on its own. The order of `sort_unstable`; linear
+/// time expected (the keys are uniform), `m log m` at worst (every key in one bucket).
 fn sort_random_keys(cell: &mut [(u64, u32)], scratch: &mut Vec<(u64, u32)>, counts: &mut Vec<u32>) {
     let m = cell.len();
     if m <= 32 {
@@ -630,15 +637,15 @@ fn sort_random_keys(cell: &mut [(u64, u32)], scratch: &mut Vec<(u64, u32)>, coun
         *slot += 1;
     }
     cell.copy_from_slice(scratch);
-    // Pairs of different buckets are in order: only a bucket's few pairs move.
-    for i in 1..m {
-        let pair = cell[i];
-        let mut j = i;
-        while j > 0 && cell[j - 1] > pair {
-            cell[j] = cell[j - 1];
-            j -= 1;
+    // Each bucket now ends where the next begins: pairs of different buckets are in
+    // order, each bucket is sorted alone.
+    let mut start = 0;
+    for &end in &counts[..1 << bits] {
+        let end = end as usize;
+        if end - start > 1 {
+            cell[start..end].sort_unstable();
         }
-        cell[j] = pair;
+        start = end;
     }
 }
 
@@ -652,31 +659,38 @@ mod tests {
 
     proptest! {
         /// Counting the points of each cell gives the order of sorting them, on grids
-        /// of one cell to many, with points on cell boundaries and repeated points.
+        /// of one cell to many (clustered: hundreds of points in a cell), with points on
+        /// cell boundaries and repeated points.
         #[test]
         fn counting_lays_out_as_sorting(
             points in prop::collection::vec(
-                (prop::array::uniform3(-40i32..40), prop::array::uniform3(0u8..4)),
+                (prop::array::uniform3(0.0f64..1.0), prop::array::uniform3(0u8..4)),
                 1..3000,
             ),
-            cell_m in prop::sample::select(vec![0.25f64, 1.0, 2.0, 7.5]),
+            spread_m in prop::sample::select(vec![2.0f64, 10.0, 80.0]),
+            cell_m in prop::sample::select(vec![1.0f64, 2.0, 7.5]),
         ) {
-            // Quarter steps: many points exactly on a boundary.
+            // Whole quarters of a metre: many points exactly on a boundary, and repeats.
             let positions: Vec<DVec3> = points
                 .iter()
-                .map(|(m, q)| DVec3::new(
-                    f64::from(m[0]) + f64::from(q[0]) * 0.25,
-                    f64::from(m[1]) + f64::from(q[1]) * 0.25,
-                    f64::from(m[2]) + f64::from(q[2]) * 0.25,
-                ))
+                .map(|(u, q)| {
+                    DVec3::from_array(std::array::from_fn(|a| {
+                        (u[a] * spread_m).floor() - spread_m * 0.5 + f64::from(q[a]) * 0.25
+                    }))
+                })
                 .collect();
             let origin = DVec3::new(-3.0, 0.5, 1.0);
             let key = |p: &DVec3| ((*p - origin) / cell_m).to_array().map(floor_to_i64);
+            let keys: Vec<[i64; 3]> = positions.iter().map(key).collect();
+            let lo = std::array::from_fn(|a| keys.iter().map(|k| k[a]).min().unwrap());
+            let hi = std::array::from_fn(|a| keys.iter().map(|k| k[a]).max().unwrap());
+            let (dims, cells) = dense_grid(lo, hi, positions.len()).expect("a dense grid");
+            let counted = Layout::counted(&positions, &key, lo, dims, cells);
             let sorted = Layout::sorted(&positions, &key);
-            let counted = Layout::new(&positions, &key);
             prop_assert_eq!(&counted.order, &sorted.order);
             prop_assert_eq!(&counted.cell_keys, &sorted.cell_keys);
             prop_assert_eq!(&counted.starts, &sorted.starts);
+            prop_assert_eq!(&Layout::new(&positions, &key).order, &sorted.order);
             for p in &positions {
                 let floored = ((*p - origin) / cell_m).floor();
                 prop_assert_eq!(key(p), [floored.x as i64, floored.y as i64, floored.z as i64]);
@@ -693,6 +707,33 @@ mod tests {
         }
     }
 
+    /// A cell's pairs sorted by buckets of their keys' leading bits are sorted as by
+    /// `sort_unstable`: uniform keys, keys sharing their leading bits (one bucket) and
+    /// repeated keys, from just past the plain sort's size to 10⁵ pairs.
+    #[test]
+    fn random_keys_are_sorted_as_by_the_library() {
+        let mut rng = SplitMix64::new(3);
+        let (mut scratch, mut counts) = (Vec::new(), Vec::new());
+        for m in [33usize, 34, 100, 1000, 4097, 100_000] {
+            for kind in 0..3 {
+                let mut pairs: Vec<(u64, u32)> = (0..m as u32)
+                    .map(|i| {
+                        let key = match kind {
+                            0 => rng.next_u64(),
+                            1 => rng.next_u64() >> 40, // every key in the first bucket
+                            _ => rng.below(7) << 61,   // a few repeated keys
+                        };
+                        (key, i)
+                    })
+                    .collect();
+                let mut expected = pairs.clone();
+                expected.sort_unstable();
+                sort_random_keys(&mut pairs, &mut scratch, &mut counts);
+                assert_eq!(pairs, expected, "{m} pairs, kind {kind}");
+            }
+        }
+    }
+
     /// The first matching item is found whichever runs of items the threads take.
     #[test]
     fn first_index_is_the_first() {
@@ -704,10 +745,12 @@ mod tests {
         }
     }
 
-    /// A sparse grid (two far clusters) takes the sorting path and a dense one the
-    /// counting path; both give every point once.
+    /// A sparse grid (two far clusters) is laid out by sorting (it is no dense grid),
+    /// every point once.
     #[test]
-    fn sparse_and_dense_grids_are_both_laid_out() {
+    fn a_sparse_grid_is_laid_out_by_sorting() {
+        assert!(dense_grid([0; 3], [9_000_000; 3], 1000).is_none());
+        assert!(dense_grid([0; 3], [99; 3], 1000).is_some());
         let mut positions: Vec<DVec3> = (0..500)
             .map(|i| DVec3::splat(f64::from(i) * 0.01))
             .collect();

@@ -124,6 +124,10 @@ fn global_settings_are_validated() {
     config.global.pruned_to = 0;
     let message = config.validate().unwrap_err().to_string();
     assert!(message.contains("pruned_to"), "{message}");
+    let mut config = VvsConfig::default();
+    config.global.prune_after_iterations = config.global.descent_iterations;
+    let message = config.validate().unwrap_err().to_string();
+    assert!(message.contains("prune_after_iterations"), "{message}");
     // A lying box and a λ*₁ too small for the search's resolution: fine for Rule2,
     // refused by the search.
     let config = VvsConfig {
@@ -279,12 +283,14 @@ fn global_reports_its_progress_phase_by_phase() {
     let mut pruned = VvsConfig::default();
     pruned.global.prune_after_iterations = 3;
     pruned.global.pruned_to = 6;
-    for config in [VvsConfig::default(), pruned] {
-        progress_phase_by_phase(config, &prior);
+    for (config, may_run_on) in [(VvsConfig::default(), 0), (pruned, 6)] {
+        progress_phase_by_phase(config, &prior, may_run_on);
     }
 }
 
-fn progress_phase_by_phase(config: VvsConfig, prior: &PriorBox) {
+/// [`global_reports_its_progress_phase_by_phase`] with `config`, under which up to
+/// `may_run_on` descents run on after pruning.
+fn progress_phase_by_phase(config: VvsConfig, prior: &PriorBox, may_run_on: usize) {
     let (mut servo, desired) = servo_with(config);
     let start = offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]);
     let mut events = Vec::new();
@@ -294,9 +300,10 @@ fn progress_phase_by_phase(config: VvsConfig, prior: &PriorBox) {
     let alone = servo.localize_in_box(&desired, start, prior).unwrap();
     assert_eq!(outcome.world_from_camera, alone.world_from_camera);
     let search = outcome.search.unwrap();
+    assert!(search.continued <= may_run_on, "{search:?}");
     let phases = [
         (SearchPhase::Screening, search.candidates),
-        (SearchPhase::Descents, search.descents + search.continued),
+        (SearchPhase::Descents, search.descents + may_run_on),
         (SearchPhase::Refinements, search.refinements),
     ];
     let mut at = 0;

@@ -29,9 +29,10 @@
 //!    and are ranked again by their cost (with [`GlobalConfig::prune_after_iterations`],
 //!    every descent first runs that many iterations and only the
 //!    [`GlobalConfig::pruned_to`] best run on: the `Localizer`'s default, 3 then the 10
-//!    best, measured in `docs/RESULTS.md`); descents that end outside the box (grown by
-//!    a grid spacing and [`BOX_MARGIN_DEG`], [`PriorBox::holds`]) are dropped, and those
-//!    that end within [`GlobalConfig::merge_distance_m`] of a better one as duplicates.
+//!    best, measured in `docs/RESULTS.md`, "Nothing lost on renderings"); descents that
+//!    end outside the box (grown by a grid spacing and [`BOX_MARGIN_DEG`],
+//!    [`PriorBox::holds`]) are dropped, and those that end within
+//!    [`GlobalConfig::merge_distance_m`] of a better one as duplicates.
 //! 3. **Refinement.** The [`GlobalConfig::refined`] best run
 //!    [`GlobalConfig::refine_method`] at full resolution; the outcome with the lowest
 //!    final cost wins (a diverged one only when every one diverged; if every node
@@ -94,10 +95,12 @@ pub struct GlobalConfig {
     pub screened: usize,
     /// Iterations of each low-resolution descent.
     pub descent_iterations: usize,
-    /// Beyond the first searches (0: off): every descent first runs this many
-    /// iterations, then only the [`GlobalConfig::pruned_to`] best, ranked as the
-    /// descents are at their end, run on to [`GlobalConfig::descent_iterations`] (λ
-    /// where it was); the others are dropped.
+    /// Pruned descents (0: off; else below [`GlobalConfig::descent_iterations`]):
+    /// every descent first runs this many iterations, then only the
+    /// [`GlobalConfig::pruned_to`] best, ranked as the descents are at their end, run
+    /// on to `descent_iterations` in a new stage from where they stopped (λ kept; its
+    /// stall test and divergence reference start again there); the others, and those
+    /// that diverged, are dropped.
     pub prune_after_iterations: usize,
     /// Descents that run on after [`GlobalConfig::prune_after_iterations`].
     pub pruned_to: usize,
@@ -177,6 +180,16 @@ impl GlobalConfig {
                 return bad(name, "must be >= 1".into());
             }
         }
+        if self.prune_after_iterations >= self.descent_iterations && self.prune_after_iterations > 0
+        {
+            return bad(
+                "global.prune_after_iterations",
+                format!(
+                    "must be 0 (off) or below descent_iterations ({}), got {}",
+                    self.descent_iterations, self.prune_after_iterations
+                ),
+            );
+        }
         if !(self.merge_distance_m >= 0.0 && self.merge_distance_m.is_finite()) {
             return bad(
                 "global.merge_distance_m",
@@ -250,6 +263,8 @@ pub struct SearchProgress {
     pub phase: SearchPhase,
     /// Items of the phase done.
     pub done: usize,
-    /// Items of the phase in all.
+    /// Items of the phase in all (the descents' phase: the descents, and as many as
+    /// may run on after [`GlobalConfig::prune_after_iterations`]: fewer do when some
+    /// diverged; its last report has `done = total`).
     pub total: usize,
 }

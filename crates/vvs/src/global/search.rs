@@ -155,8 +155,7 @@ impl<'a> Servo<'a> {
         let identity = angles.iter().position(|o| *o == [0.0; 3]);
         // With pruning, every descent first runs `first` iterations, then the best
         // run on from where they stopped.
-        let pruning = settings.prune_after_iterations > 0
-            && settings.prune_after_iterations < settings.descent_iterations;
+        let pruning = settings.prune_after_iterations > 0;
         let first = if pruning {
             settings.prune_after_iterations
         } else {
