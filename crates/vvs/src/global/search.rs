@@ -30,6 +30,13 @@ struct Descent {
     rank: f64,
 }
 
+impl Descent {
+    /// Whether it may be kept: it did not diverge and has a rank.
+    fn ranked(&self) -> bool {
+        !matches!(self.result.stop, StopReason::Diverged(_)) && self.rank.is_finite()
+    }
+}
+
 /// The desired picture as every orientation of the search sees it: at each node the
 /// rendering is compared with each (a central camera turned about its centre sees the
 /// same rays, so a node is rendered once whatever its orientation).
@@ -161,14 +168,13 @@ impl<'a> Servo<'a> {
         } else {
             settings.descent_iterations
         };
-        let continued = if pruning {
+        let may_run_on = if pruning {
             settings.pruned_to.min(screened.len())
         } else {
             0
         };
-        let total = screened.len() + continued;
+        let total = screened.len() + may_run_on;
         let mut descents: Vec<Descent> = Vec::with_capacity(screened.len());
-        let mut descents_continued = 0;
         let mut descent_iterations = 0;
         let mut history = Vec::new();
         for (done, &(_, index, orientation)) in screened.iter().enumerate() {
@@ -200,16 +206,13 @@ impl<'a> Servo<'a> {
         }
         if pruning {
             // The best by rank run on (a diverged descent or an infinite rank never).
-            descents.retain(|d| {
-                !matches!(d.result.stop, StopReason::Diverged(_)) && d.rank.is_finite()
-            });
+            descents.retain(Descent::ranked);
             descents.sort_by(|a, b| {
                 a.rank
                     .total_cmp(&b.rank)
                     .then(a.candidate.cmp(&b.candidate))
             });
-            descents.truncate(continued);
-            descents_continued = descents.len();
+            descents.truncate(may_run_on);
             let remaining = settings.descent_iterations - first;
             for (done, d) in descents.iter_mut().enumerate() {
                 report(SearchPhase::Descents, screened.len() + done, total);
@@ -243,13 +246,14 @@ impl<'a> Servo<'a> {
                 d.result = result;
             }
         }
+        let continued = if pruning { descents.len() } else { 0 };
         let mut descended: Vec<(f64, (usize, usize), Isometry3)> =
             Vec::with_capacity(descents.len());
         for d in descents {
             // A descent that left the box (grown by a grid spacing and a few degrees)
             // found something else than the truth the box holds.
             let in_box = prior.holds(&initial, &d.pose, settings.grid_spacing_m, BOX_MARGIN_DEG);
-            if !matches!(d.result.stop, StopReason::Diverged(_)) && d.rank.is_finite() && in_box {
+            if d.ranked() && in_box {
                 descended.push((d.rank, d.candidate, d.pose));
             }
         }
@@ -285,7 +289,7 @@ impl<'a> Servo<'a> {
         outcome.search = Some(SearchReport {
             candidates: nodes.len() * angles.len(),
             descents: screened.len(),
-            continued: if pruning { descents_continued } else { 0 },
+            continued,
             refinements: kept.len(),
             descent_iterations,
             chosen_node_m,
