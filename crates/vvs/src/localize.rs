@@ -107,7 +107,10 @@ pub struct Localizer {
     /// prior box, the global search's descents pruned (`global.prune_after_iterations
     /// = 3`, `global.pruned_to = 10`: every screened candidate descends 3 iterations,
     /// the 10 best run on to 10; a search 1.96 → 1.55 s, the same success on the
-    /// protocols but one run of 448: `docs/RESULTS.md`, "Nothing lost on renderings").
+    /// protocols but one run of 448: `docs/RESULTS.md`, "Nothing lost on renderings"),
+    /// and up to 3 descents refined when their ranks are within 25 % of the best's
+    /// (`global.refined = 3`: on a photograph two basins may rank alike at low
+    /// resolution, "Real pictures").
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2; [`Method::Global`]
     /// asks for the prior box below, [`VvsError::GlobalWithoutPrior`] without one).
@@ -138,6 +141,7 @@ impl Default for Localizer {
                 global: GlobalConfig {
                     prune_after_iterations: 3,
                     pruned_to: 10,
+                    refined: 3,
                     ..GlobalConfig::default()
                 },
                 ..VvsConfig::default()

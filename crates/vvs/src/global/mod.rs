@@ -33,7 +33,8 @@
 //!    end outside the box (grown by a grid spacing and [`BOX_MARGIN_DEG`],
 //!    [`PriorBox::holds`]) are dropped, and those that end within
 //!    [`GlobalConfig::merge_distance_m`] of a better one as duplicates.
-//! 3. **Refinement.** The [`GlobalConfig::refined`] best run
+//! 3. **Refinement.** The best, and up to [`GlobalConfig::refined`] in all ranked
+//!    within [`GlobalConfig::refine_within`] of it, run
 //!    [`GlobalConfig::refine_method`] at full resolution; the outcome with the lowest
 //!    final cost wins (a diverged one only when every one diverged; if every node
 //!    diverged already at low resolution, the initial pose itself is refined, and the
@@ -49,14 +50,19 @@
 //! On the common support ([`crate::Support::Common`], the `Localizer`'s) each candidate
 //! is compared on the pixels its rendering and the picture share, so scores of
 //! candidates that see different parts of the picture must not favour the smaller
-//! part: both scores below are divided by the fraction of the picture's pixels
-//! compared. The screening keeps the [`GlobalConfig::screened`] best by one minus the
-//! PGMs' correlation (on a photograph a small, smooth support matches anything in the
-//! squared difference) and as many by their mean squared difference (which tells
-//! renderings apart whose PGMs differ in contrast alone), and the descents are ranked
-//! by the correlation at their end, the picture unturned: their own costs compare
-//! pictures normalised over supports of different shapes.
-//!
+//! part: each score is the fraction of the picture left unexplained, the pixels not
+//! compared counting as unexplained (`1 − c·r`, `c` the fraction of the picture's
+//! pixels compared, `r` how well the samples compared agree). The screening keeps the
+//! [`GlobalConfig::screened`] best with `r` the PGMs' correlation (on a photograph a
+//! small, smooth support matches anything in the squared difference) and as many with
+//! `r` their coefficient of determination, one minus their mean squared difference
+//! over the picture's variance (which tells renderings apart whose PGMs differ in
+//! contrast alone), and the descents are ranked by the first at their end, the picture
+//! unturned: their own costs compare pictures normalised over supports of different
+//! shapes. (Dividing each shortfall by `c` instead let candidates below the street,
+//! seeing a flat patch of the ground's underside, win twice the paper's box:
+//! `docs/RESULTS.md`.)
+
 //! The outcome is that of the winning refinement, with a [`SearchReport`] of what the
 //! search did and its whole time in `time_s`.
 
@@ -89,9 +95,9 @@ pub struct GlobalConfig {
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
     /// Candidates kept after screening, each then descends. On the common support
-    /// ([`crate::Support::Common`]) this many by each of two scores (the PGMs'
-    /// correlation and their mean squared difference, each divided by the fraction
-    /// of the picture compared), so up to twice as many descents.
+    /// ([`crate::Support::Common`]) this many by each of two scores (the fraction of
+    /// the picture the PGMs' correlation, or their coefficient of determination,
+    /// leaves unexplained), so up to twice as many descents.
     pub screened: usize,
     /// Iterations of each low-resolution descent.
     pub descent_iterations: usize,
@@ -104,10 +110,17 @@ pub struct GlobalConfig {
     pub prune_after_iterations: usize,
     /// Descents that run on after [`GlobalConfig::prune_after_iterations`].
     pub pruned_to: usize,
-    /// Descents ending this close to a better one are duplicates (metres).
+    /// Descents ending this close to a better one are duplicates (metres; at most a
+    /// quarter of the smallest of [`GlobalConfig::grid_spacing_m`], so that in a small
+    /// box two basins a few grid nodes apart stay distinct).
     pub merge_distance_m: f64,
-    /// Descents refined at full resolution.
+    /// The most descents refined at full resolution (the best one always).
     pub refined: usize,
+    /// The descents after the best are refined only when their rank is within this
+    /// fraction of the best's (`rank ≤ best · (1 + refine_within)`): where the
+    /// low-resolution ranking cannot tell two basins apart, the full-resolution costs
+    /// do (`docs/RESULTS.md`, 7-Scenes' `global`); where it can, one refinement is run.
+    pub refine_within: f64,
     /// The method that refines them (a PGM rule or PoVS).
     pub refine_method: Method,
 }
@@ -125,6 +138,7 @@ impl Default for GlobalConfig {
             pruned_to: 10,
             merge_distance_m: 0.5,
             refined: 1,
+            refine_within: 0.25,
             refine_method: Method::Rule2,
         }
     }
@@ -194,6 +208,12 @@ impl GlobalConfig {
             return bad(
                 "global.merge_distance_m",
                 format!("must be >= 0, got {}", self.merge_distance_m),
+            );
+        }
+        if !(self.refine_within >= 0.0 && self.refine_within.is_finite()) {
+            return bad(
+                "global.refine_within",
+                format!("must be >= 0, got {}", self.refine_within),
             );
         }
         if self.refine_method == Method::Global {
