@@ -30,7 +30,8 @@ pub enum Method {
     /// Beyond the paper: global localisation inside a prior region
     /// ([`crate::global`], settings in [`VvsConfig::global`]): a low-resolution search
     /// over a grid of the region, then [`crate::GlobalConfig::refine_method`] from the
-    /// best [`crate::GlobalConfig::refined`] low-resolution descents. It takes a prior
+    /// best low-resolution descent (and up to [`crate::GlobalConfig::refined`] ranked
+    /// within [`crate::GlobalConfig::refine_within`] of it). It takes a prior
     /// box, given where it is run ([`crate::Localizer::prior`],
     /// [`crate::Servo::localize_in_box`]); the calls of the local methods refuse it.
     Global,

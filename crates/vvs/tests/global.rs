@@ -124,7 +124,7 @@ fn global_settings_are_validated() {
     config.global.pruned_to = 0;
     let message = config.validate().unwrap_err().to_string();
     assert!(message.contains("pruned_to"), "{message}");
-    for bad in [-0.1, f64::NAN, f64::INFINITY] {
+    for bad in [-0.1, f64::NAN, f64::NEG_INFINITY] {
         let mut config = VvsConfig::default();
         config.global.refine_within = bad;
         let message = config.validate().unwrap_err().to_string();

@@ -32,7 +32,8 @@
 //!    best, measured in `docs/RESULTS.md`, "Nothing lost on renderings"); descents that
 //!    end outside the box (grown by a grid spacing and [`BOX_MARGIN_DEG`],
 //!    [`PriorBox::holds`]) are dropped, and those that end within
-//!    [`GlobalConfig::merge_distance_m`] of a better one as duplicates.
+//!    [`GlobalConfig::merge_distance_m`] (at most a quarter of the smallest grid
+//!    spacing) of a better one as duplicates.
 //! 3. **Refinement.** The best, and up to [`GlobalConfig::refined`] in all ranked
 //!    within [`GlobalConfig::refine_within`] of it, run
 //!    [`GlobalConfig::refine_method`] at full resolution; the outcome with the lowest
@@ -59,10 +60,11 @@
 //! over the picture's variance (which tells renderings apart whose PGMs differ in
 //! contrast alone), and the descents are ranked by the first at their end, the picture
 //! unturned: their own costs compare pictures normalised over supports of different
-//! shapes. (Dividing each shortfall by `c` instead let candidates below the street,
-//! seeing a flat patch of the ground's underside, win twice the paper's box:
-//! `docs/RESULTS.md`.)
-
+//! shapes. (Dividing each shortfall by `c` instead let candidates above the roofs or
+//! below the street, seeing a flat patch, win twice the paper's box: `docs/RESULTS.md`.)
+//! Scores are ≥ 0 (`r ≤ 1`); a candidate whose either PGM is flat on the samples
+//! compared has none.
+//!
 //! The outcome is that of the winning refinement, with a [`SearchReport`] of what the
 //! search did and its whole time in `time_s`.
 
@@ -119,7 +121,9 @@ pub struct GlobalConfig {
     /// The descents after the best are refined only when their rank is within this
     /// fraction of the best's (`rank ≤ best · (1 + refine_within)`): where the
     /// low-resolution ranking cannot tell two basins apart, the full-resolution costs
-    /// do (`docs/RESULTS.md`, 7-Scenes' `global`); where it can, one refinement is run.
+    /// do (`docs/RESULTS.md`, 7-Scenes' `global`); where it can, one refinement is run
+    /// (infinite: always [`GlobalConfig::refined`]; ranks are ≥ 0, a best of 0 refines
+    /// only its ties).
     pub refine_within: f64,
     /// The method that refines them (a PGM rule or PoVS).
     pub refine_method: Method,
@@ -210,7 +214,7 @@ impl GlobalConfig {
                 format!("must be >= 0, got {}", self.merge_distance_m),
             );
         }
-        if !(self.refine_within >= 0.0 && self.refine_within.is_finite()) {
+        if !(self.refine_within >= 0.0) {
             return bad(
                 "global.refine_within",
                 format!("must be >= 0, got {}", self.refine_within),

@@ -524,10 +524,12 @@ impl<'a> Servo<'a> {
                 let compared = support.iter().filter(|&&s| s).count() as f64;
                 let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
                 let coverage = compared / observed;
-                (*cost, *squared) = if w_sum > 0.0 && coverage > 0.0 {
-                    let (ma, mb) = (a_sum / w_sum, b_sum / w_sum);
-                    let (va, vb) = (aa / w_sum - ma * ma, bb / w_sum - mb * mb);
-                    let correlation = (ab / w_sum - ma * mb) / (va * vb).sqrt().max(1e-30);
+                let (ma, mb) = (a_sum / w_sum.max(1e-30), b_sum / w_sum.max(1e-30));
+                let (va, vb) = (aa / w_sum - ma * ma, bb / w_sum - mb * mb);
+                // A flat PGM on either side (no variance to explain, or rounding's)
+                // scores nothing: its correlation would be noise over zero.
+                (*cost, *squared) = if w_sum > 0.0 && coverage > 0.0 && va > 1e-20 && vb > 1e-20 {
+                    let correlation = ((ab / w_sum - ma * mb) / (va * vb).sqrt()).clamp(-1.0, 1.0);
                     let mean_squared = ((aa - 2.0 * ab + bb) / w_sum).max(0.0);
                     // What each score leaves unexplained of the picture: on the samples
                     // compared, one minus the correlation, or the squared difference
@@ -535,11 +537,7 @@ impl<'a> Servo<'a> {
                     // coefficient of determination); the pixels not compared count as
                     // unexplained, so a candidate that sees a flat corner of the picture
                     // does not win by its tiny differences.
-                    let determination = if vb > 0.0 {
-                        1.0 - mean_squared / vb
-                    } else {
-                        f64::NEG_INFINITY
-                    };
+                    let determination = 1.0 - mean_squared / vb;
                     (1.0 - coverage * correlation, 1.0 - coverage * determination)
                 } else {
                     (f64::INFINITY, f64::INFINITY)
@@ -786,6 +784,7 @@ mod tests {
         servo.search_cost(search, &above, lambda, &mut o).unwrap();
         let best = |scores: &[f64]| scores.iter().copied().fold(f64::INFINITY, f64::min);
         let above = [best(&o.costs), best(&o.squared)];
+        assert!(above.iter().all(|s| s.is_finite()), "{above:?}");
         eprintln!("near the truth: {near:?}; above the roofs, the best orientation: {above:?}");
         for list in 0..2 {
             assert!(
