@@ -146,7 +146,8 @@ pub struct VvsConfig {
     /// The stall test's window in step 1's stages when a step 2 follows (`None`:
     /// `stall_window`): those stages only bring the pose into the next one's basin,
     /// which takes fewer iterations than settling at the optimum. 0 turns the test
-    /// off there.
+    /// off there. A global search's refinements ignore it (their start, a
+    /// low-resolution descent's end, may lie a grid spacing away).
     pub intermediate_stall_window: Option<usize>,
     /// Relative decrease of the cost the last `stall_window` iterations must achieve.
     pub stall_relative_decrease: f64,

@@ -110,7 +110,8 @@ pub struct Localizer {
     /// protocols but one run of 448: `docs/RESULTS.md`, "Nothing lost on renderings"),
     /// and up to 3 descents refined when their ranks are within 25 % of the best's
     /// (`global.refined = 3`: on a photograph two basins may rank alike at low
-    /// resolution, "Real pictures").
+    /// resolution, "Real pictures"), each refinement's stages run to the full stall
+    /// window (not `intermediate_stall_window`: a descent may end a grid spacing away).
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2; [`Method::Global`]
     /// asks for the prior box below, [`VvsError::GlobalWithoutPrior`] without one).

@@ -36,7 +36,10 @@
 //!    spacing) of a better one as duplicates.
 //! 3. **Refinement.** The best, and up to [`GlobalConfig::refined`] in all ranked
 //!    within [`GlobalConfig::refine_within`] of it, run
-//!    [`GlobalConfig::refine_method`] at full resolution; the outcome with the lowest
+//!    [`GlobalConfig::refine_method`] at full resolution, every stage to the full stall
+//!    window (a descent's pose may lie a grid spacing from the optimum along a shallow
+//!    valley; [`crate::VvsConfig::intermediate_stall_window`] is for starts already in
+//!    the next stage's basin, and a search ignores it); the outcome with the lowest
 //!    final cost wins (a diverged one only when every one diverged; if every node
 //!    diverged already at low resolution, the initial pose itself is refined, and the
 //!    outcome says how it ends).
