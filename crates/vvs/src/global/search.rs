@@ -270,18 +270,16 @@ impl<'a> Servo<'a> {
         // runs to the full stall window (`intermediate_stall_window` shortens step 1's
         // stages for starts already in the next stage's basin).
         let intermediate_stall_window = self.config.intermediate_stall_window.take();
-        let mut refinements = Vec::with_capacity(kept.len());
-        for (rank, &(_, pose)) in kept.iter().enumerate() {
-            report(SearchPhase::Refinements, rank, kept.len());
-            let outcome = self.run(settings.refine_method, desired, pose);
-            refinements.push(outcome);
-            if refinements.last().is_some_and(Result::is_err) {
-                break;
-            }
-        }
+        let refinements: Result<Vec<Outcome>, VvsError> = kept
+            .iter()
+            .enumerate()
+            .map(|(rank, &(_, pose))| {
+                report(SearchPhase::Refinements, rank, kept.len());
+                self.run(settings.refine_method, desired, pose)
+            })
+            .collect();
         self.config.intermediate_stall_window = intermediate_stall_window;
-        for (rank, outcome) in refinements.into_iter().enumerate() {
-            let outcome = outcome?;
+        for (rank, outcome) in refinements?.into_iter().enumerate() {
             let cost = match outcome.stop {
                 StopReason::Diverged(_) => f64::INFINITY,
                 _ if outcome.cost.is_finite() => outcome.cost,
