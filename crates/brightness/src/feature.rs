@@ -162,6 +162,26 @@ impl Brightness {
     /// reads. [`Brightness::values`] and [`Brightness::interaction`] keep what the
     /// last [`Brightness::compute`] gave.
     pub fn compute_pixels(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
+        self.checked_pixels(picture, true)
+    }
+
+    /// The image part of [`Brightness::compute_pixels`] only: [`Brightness::image`]
+    /// (normalised if enabled), [`Brightness::observed`] and
+    /// [`Brightness::inverse_range`], the same values, without the gradient and the
+    /// interaction rows (what a feature of a desired picture reads: its transform, not
+    /// its derivative). [`Brightness::gradient`] and [`Brightness::pixel_interaction`]
+    /// keep what the last computation with them gave.
+    pub fn compute_image(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
+        self.checked_pixels(picture, false)
+    }
+
+    /// [`Brightness::pixels`] once the size is checked, with the gradient and the
+    /// interaction rows or without.
+    fn checked_pixels(
+        &mut self,
+        picture: &impl AnyImage,
+        derivatives: bool,
+    ) -> Result<(), BrightnessError> {
         if picture.width() as usize != self.tables.width
             || picture.height() as usize != self.tables.height
         {
@@ -177,6 +197,7 @@ impl Brightness {
         isa::arch().dispatch(Pixels {
             brightness: self,
             picture,
+            derivatives,
         });
         Ok(())
     }
@@ -227,13 +248,14 @@ impl Brightness {
                 });
             }
         }
-        self.compute_pixels(rendering)?;
+        // The gradient and the rows are those of the edge of the support, below.
+        self.checked_pixels(rendering, false)?;
         self.edge_of_support(against);
         Ok(())
     }
 
     /// The interaction rows of [`Brightness::compute_against`], after
-    /// [`Brightness::compute_pixels`] of the rendering on the compared pixels.
+    /// [`Brightness::compute_image`] of the rendering on the compared pixels.
     fn edge_of_support(&mut self, against: Against<'_>) {
         let (w, h, n) = (
             self.tables.width,
@@ -289,9 +311,10 @@ impl Brightness {
         self.rows();
     }
 
-    /// The body of [`Brightness::compute_pixels`], once the size is checked.
+    /// The body of [`Brightness::compute_pixels`] (`derivatives`) or
+    /// [`Brightness::compute_image`], once the size is checked.
     #[inline(always)]
-    fn pixels(&mut self, picture: &impl AnyImage) {
+    fn pixels(&mut self, picture: &impl AnyImage, derivatives: bool) {
         let valid = self.tables.grid.valid();
         picture
             .inverse_range(&mut self.inverse_range)
@@ -313,7 +336,7 @@ impl Brightness {
         self.scale = 1.0;
         self.mean = 0.0;
         if !all_observed {
-            self.partly_observed();
+            self.partly_observed(derivatives);
             return;
         }
         if self.normalize {
@@ -340,6 +363,9 @@ impl Brightness {
             self.scale = scale as f32;
             self.mean = mean;
         }
+        if !derivatives {
+            return;
+        }
         // The gradient and the interaction rows are zero outside the region from the
         // start, and only the region is written.
         self.tables
@@ -352,7 +378,7 @@ impl Brightness {
     /// pixel of the region: the normalisation over the observed pixels only, the
     /// others 0, the gradient inside the observed pixels.
     #[inline(always)]
-    fn partly_observed(&mut self) {
+    fn partly_observed(&mut self, derivatives: bool) {
         if self.normalize {
             let observed = || {
                 self.tables
@@ -380,6 +406,9 @@ impl Brightness {
             }
             self.scale = scale as f32;
             self.mean = mean;
+        }
+        if !derivatives {
+            return;
         }
         self.observed_gradient
             .rebuild(&self.observed, self.tables.width, self.tables.height);
@@ -494,6 +523,7 @@ impl Brightness {
 struct Pixels<'a, P> {
     brightness: &'a mut Brightness,
     picture: &'a P,
+    derivatives: bool,
 }
 
 impl<P: AnyImage> pulp::WithSimd for Pixels<'_, P> {
@@ -501,6 +531,6 @@ impl<P: AnyImage> pulp::WithSimd for Pixels<'_, P> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.brightness.pixels(self.picture);
+        self.brightness.pixels(self.picture, self.derivatives);
     }
 }

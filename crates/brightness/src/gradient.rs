@@ -78,31 +78,34 @@ impl MaskedGradient {
 
     /// The plan of another region, in place (the buffers kept).
     pub(crate) fn rebuild(&mut self, valid: &[bool], width: usize, height: usize) {
-        let inside = |k: usize| {
-            let (i, j) = (k % width, k / width);
-            valid[k]
-                && i > 0
-                && i + 1 < width
-                && j > 0
-                && j + 1 < height
-                && valid[k - 1]
-                && valid[k + 1]
-                && valid[k - width]
-                && valid[k + width]
-        };
         let (interior, edge) = (&mut self.interior, &mut self.edge);
         interior.clear();
         edge.clear();
-        for k in 0..width * height {
-            if inside(k) {
-                match interior.last_mut() {
-                    // Interior pixels are never in the first or last column: a run
-                    // never crosses a row.
-                    Some(run) if run[1] as usize == k => run[1] += 1,
-                    _ => interior.push([k as u32, k as u32 + 1]),
+        for j in 0..height {
+            let row = j * width;
+            for i in 0..width {
+                let k = row + i;
+                if !valid[k] {
+                    continue;
                 }
-            } else if valid[k] {
-                edge.push(k as u32);
+                let inside = i > 0
+                    && i + 1 < width
+                    && j > 0
+                    && j + 1 < height
+                    && valid[k - 1]
+                    && valid[k + 1]
+                    && valid[k - width]
+                    && valid[k + width];
+                if inside {
+                    match interior.last_mut() {
+                        // Interior pixels are never in the first or last column: a run
+                        // never crosses a row.
+                        Some(run) if run[1] as usize == k => run[1] += 1,
+                        _ => interior.push([k as u32, k as u32 + 1]),
+                    }
+                } else {
+                    edge.push(k as u32);
+                }
             }
         }
         self.width = width;

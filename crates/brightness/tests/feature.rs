@@ -292,3 +292,43 @@ fn rows_against_a_picture_follow_the_edge_of_the_support() {
     };
     assert!(feature.compute_against(&view, short).is_err());
 }
+
+/// `Brightness::compute_image` gives what `compute_pixels` gives of the image (values,
+/// observed pixels, inverse ranges, normalisation), bit for bit, partly observed or not,
+/// normalised or not, and leaves the derivatives as they were.
+#[test]
+fn the_image_alone_is_the_image_of_the_whole_computation() {
+    use frame::Restricted;
+    let (camera, frame) = holed_scene();
+    let hits: Vec<bool> = frame
+        .status
+        .iter()
+        .map(|&s| s == PixelStatus::Hit)
+        .collect();
+    let all = vec![true; hits.len()];
+    let mut other = frame.clone();
+    other.intensity.iter_mut().for_each(|i| *i = 1.0 - *i);
+    for normalize in [false, true] {
+        for observed in [&hits, &all] {
+            let view = Restricted::new(&frame, observed).unwrap();
+            let mut whole = Brightness::new(&camera).with_normalization(normalize);
+            whole.compute_pixels(&view).unwrap();
+            let mut image = Brightness::new(&camera).with_normalization(normalize);
+            image.compute_pixels(&other).unwrap();
+            let (gradient, rows) = (
+                image.gradient().to_vec(),
+                image.pixel_interaction().to_vec(),
+            );
+            image.compute_image(&view).unwrap();
+            assert_eq!(image.image(), whole.image());
+            assert_eq!(image.observed(), whole.observed());
+            assert_eq!(image.all_observed(), whole.all_observed());
+            assert_eq!(image.inverse_range(), whole.inverse_range());
+            assert_eq!(image.normalization_mean(), whole.normalization_mean());
+            assert_eq!(image.normalization_scale(), whole.normalization_scale());
+            assert_eq!(image.gradient(), &gradient[..]);
+            assert_eq!(image.pixel_interaction(), &rows[..]);
+            assert_ne!(image.gradient(), whole.gradient());
+        }
+    }
+}

@@ -438,7 +438,7 @@ impl Pgm {
     /// `G(I, λ)` at the samples only (for the desired image).
     pub fn transform(&mut self, picture: &impl AnyImage, lambda: f32) -> Result<&[f32], PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute_pixels(picture)?;
+        self.brightness.compute_image(picture)?;
         if let Some(f) = self.filters(lambda, false, false) {
             self.recursive_g_j(&f, false);
             return Ok(&self.values);

@@ -81,6 +81,9 @@ proptest! {
         };
         let mut pgm = Pgm::new(&camera, options).unwrap();
         pgm.compute(&frame, lambda, PgmJacobian::Convolved).unwrap();
+        // The desired picture's transform (its image alone): G, bit for bit.
+        let mut desired = Pgm::new(&camera, options).unwrap();
+        prop_assert_eq!(desired.transform(&frame, lambda).unwrap(), pgm.values());
         let masked: Vec<f32> = image.iter().zip(camera.valid_pixels()).map(|(&v, &ok)| if ok { v } else { 0.0 }).collect();
         let scale = masked.iter().sum::<f32>() as f64 + 1e-3;
         let (g_bound, j_bound) = if recursive {
