@@ -13,7 +13,7 @@ use super::{
     BOX_MARGIN_DEG, GlobalConfig, MAX_CANDIDATES, PriorBox, SearchPhase, SearchProgress,
     SearchReport, turned, turned_about_optical_axis,
 };
-use crate::servo::{Level, Planned, Stage, StageResult, outside};
+use crate::servo::{Level, Planned, Stage, StageResult, outside, render_once};
 use crate::{Outcome, Servo, StopReason, Support, VvsError};
 
 /// A candidate: its score, its node and its orientation (indices).
@@ -490,12 +490,13 @@ impl<'a> Servo<'a> {
             camera,
             renderer,
             frame,
+            rendered_at,
             pgm,
             desired_pgm,
             support,
             ..
         } = &mut self.levels[level];
-        let stats = renderer.render(self.cloud, &world_from_camera.inverse(), frame)?;
+        let stats = render_once(renderer, rendered_at, self.cloud, world_from_camera, frame)?;
         let valid = camera.valid_pixel_count().max(1) as f64;
         if (stats.pixels_hit as f64) / valid < self.config.min_hit_fraction {
             return Ok(());

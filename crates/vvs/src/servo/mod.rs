@@ -13,7 +13,7 @@ use glam::DVec3;
 use splat::PointCloud;
 use ucm::{Camera, Isometry3};
 
-pub(crate) use level::Level;
+pub(crate) use level::{Level, render_once};
 pub(crate) use stage::{Planned, Stage, StageResult, outside};
 
 use crate::vignetting::MAX_COEFFICIENT;

@@ -9,7 +9,7 @@ use glam::DVec3;
 use pgm::Pgm;
 use ucm::Isometry3;
 
-use super::Level;
+use super::{Level, render_once};
 use crate::solve::solve;
 use crate::vignetting::MAX_COEFFICIENT;
 use crate::{
@@ -159,6 +159,7 @@ impl Servo<'_> {
             camera,
             renderer,
             frame,
+            rendered_at,
             pgm,
             brightness,
             vignetting,
@@ -206,7 +207,7 @@ impl Servo<'_> {
         let (stop, iterations) = 'stage: {
             for iteration in 0..budget {
                 let started = Instant::now();
-                let stats = renderer.render(self.cloud, &pose.inverse(), frame)?;
+                let stats = render_once(renderer, rendered_at, self.cloud, pose, frame)?;
                 let hits = stats.pixels_hit as f64;
                 if hits / valid_count < self.config.min_hit_fraction {
                     break 'stage (StopReason::Diverged(Divergence::NoValidPixels), iteration);
