@@ -3,7 +3,8 @@
 //! at 320×240 (goal 0.5 s), and one PGMoT frame at 640×480 (goal 33 ms, 30 Hz).
 //!
 //! End to end as `vvs::Localizer` (set up at each call, and prepared once for the
-//! cloud and camera) and `vvs::Tracker` run them, with their defaults on one thread:
+//! cloud and camera) and `vvs::Tracker` (`Tracker::default_config()`) run them, with
+//! their defaults on one thread:
 //! the picture (rendered at the truth, then degraded by the default acquisition) in
 //! memory, the cloud loaded. Each result is checked against the truth
 //! before it is timed, so that a faster but wrong configuration cannot pass. Set
@@ -107,7 +108,11 @@ fn goal_pgmot_frame(c: &mut Criterion) {
     let previous = truth
         * Isometry3::from_pose_vector([-0.05, 0.0, 0.0, 0.0, 0.0, 0.5f64.to_radians()]).unwrap();
     let tracker = || {
-        let servo = Servo::new(&city.cloud, &camera, one_thread()).unwrap();
+        let config = VvsConfig {
+            parallel: false,
+            ..Tracker::default_config()
+        };
+        let servo = Servo::new(&city.cloud, &camera, config).unwrap();
         Tracker::new(servo, Method::Rule2, previous).unwrap()
     };
     let outcome = tracker().align(&picture).unwrap();

@@ -6,7 +6,8 @@ use frame::Image;
 use glam::DVec3;
 use ucm::Isometry3;
 use vvs::{
-    Method, Prediction, PriorBox, Recovery, Servo, StopReason, Tracker, VvsConfig, VvsError,
+    Localizer, Method, Prediction, PriorBox, Recovery, Servo, StopReason, Tracker, VvsConfig,
+    VvsError,
 };
 use world::{Acquisition, camera_looking_down};
 
@@ -319,4 +320,62 @@ fn recovery_searches_again_after_a_failed_alignment() {
             Err(VvsError::Config { .. })
         ));
     }
+}
+
+/// The tracker's defaults (step 1 from λ* = 7.5) follow measured pictures as closely as
+/// the localiser's (from λ* = 15), in fewer iterations: a frame's start is well inside
+/// λ = 7.5's basin.
+#[test]
+fn the_tracker_defaults_follow_as_closely_in_fewer_iterations() {
+    let camera = fixture();
+    let truth = truth(5);
+    let mut servo = Servo::new(&city().cloud, &camera, config()).unwrap();
+    let acquisition = Acquisition {
+        vignetting: 0.0,
+        ..Acquisition::default()
+    };
+    let pictures: Vec<Image> = truth
+        .iter()
+        .enumerate()
+        .map(|(k, pose)| {
+            let rendered = servo.render(pose).unwrap();
+            acquisition.acquire(&rendered, &camera, k, k as f64 / 30.0)
+        })
+        .collect();
+    let start =
+        truth[0] * Isometry3::from_pose_vector([0.03, -0.02, 0.01, 0.0, 0.0, 0.01]).unwrap();
+    let track = |config: VvsConfig| {
+        let servo = Servo::new(&city().cloud, &camera, config).unwrap();
+        let mut tracker = Tracker::new(servo, Method::Rule2, start).unwrap();
+        let report = tracker
+            .track(pictures.iter().map(Some), 1, |_| ControlFlow::Continue(()))
+            .unwrap();
+        assert!(!report.lost);
+        let worst_m = report
+            .frames
+            .iter()
+            .map(|f| f.outcome.world_from_camera.distance_to(&truth[f.frame]).0)
+            .fold(0.0, f64::max);
+        let iterations: usize = report
+            .frames
+            .iter()
+            .map(|f| f.outcome.iterations.iter().sum::<usize>())
+            .sum();
+        (worst_m, iterations)
+    };
+    let (tracker_m, tracker_iterations) = track(Tracker::default_config());
+    let (localizer_m, localizer_iterations) = track(Localizer::default().config);
+    eprintln!(
+        "tracker: {tracker_m:.4} m, {tracker_iterations} iterations; \
+         localiser: {localizer_m:.4} m, {localizer_iterations} iterations"
+    );
+    assert!(tracker_m < 0.01, "{tracker_m} m");
+    assert!(
+        tracker_m <= localizer_m + 0.002,
+        "{tracker_m} against {localizer_m} m"
+    );
+    assert!(
+        4 * tracker_iterations <= 3 * localizer_iterations,
+        "{tracker_iterations} against {localizer_iterations} iterations"
+    );
 }

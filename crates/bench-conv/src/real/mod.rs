@@ -38,7 +38,7 @@
 //! [tracking]                         # the block frame after frame, 1 frame in N
 //! frames = "450-549"
 //! frame_steps = [1, 2, 5, 10]
-//! methods = ["povs", "localizer"]
+//! methods = ["povs", "tracker"]
 //!
 //! [catadioptric]                     # every query resampled to a UCM camera, same pose
 //! xi = 0.9
@@ -46,7 +46,8 @@
 //! ```
 //!
 //! A method is `localizer` (`vvs::Localizer::default()`: Rule2, the Convolved Jacobian,
-//! brightness normalised, compared on the common support) or `method/jacobian` (`povs`,
+//! brightness normalised, compared on the common support), `tracker` (Rule2 with
+//! `vvs::Tracker::default_config()`) or `method/jacobian` (`povs`,
 //! `rule0/convolved`, `rule2/paper`, …) with the localiser's other settings, and
 //! `+region` to compare on every pixel of the region as the paper does. The
 //! *reference* of a query is its photometric optimum: PoVS from the truth on the common
@@ -64,4 +65,4 @@ pub use run::{
     Benchmark, PoseCheckRecord, Query, QueryKind, RealResults, RunRecord, TrackRecord,
     run_benchmark,
 };
-pub use spec::{BenchMethod, LocalMapSpec, PoseCheckSpec, RealSpec, Split};
+pub use spec::{BenchMethod, LocalMapSpec, PoseCheckSpec, Preset, RealSpec, Split};

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail, ensure};
 use serde::Deserialize;
-use vvs::{Localizer, Method, PgmJacobian, PriorBox, Support, VvsConfig};
+use vvs::{Localizer, Method, PgmJacobian, PriorBox, Support, Tracker, VvsConfig};
 
 /// A benchmark file (format in the [module documentation](super)).
 #[derive(Clone, Debug, Deserialize)]
@@ -188,21 +188,36 @@ pub struct BenchMethod {
     pub jacobian: PgmJacobian,
     /// The pixels compared.
     pub support: Support,
-    /// Whether this is `localizer` (the localiser's defaults).
-    pub localizer: bool,
+    /// Whether this is `localizer` or `tracker` (their defaults, as they are).
+    pub preset: Option<Preset>,
+}
+
+/// A method of the benchmark taken with its settings as the library gives them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    /// `localizer`: `vvs::Localizer::default()`.
+    Localizer,
+    /// `tracker`: Rule2 with `vvs::Tracker::default_config()`.
+    Tracker,
 }
 
 impl BenchMethod {
-    /// Parse `localizer` or `method[/jacobian][+region]`.
+    /// Parse `localizer`, `tracker` or `method[/jacobian][+region]`.
     pub fn parse(text: &str) -> anyhow::Result<Self> {
         let text = text.trim();
         let defaults = Localizer::default();
-        if text == "localizer" {
+        let preset = match text {
+            "localizer" => Some(Preset::Localizer),
+            "tracker" => Some(Preset::Tracker),
+            _ => None,
+        };
+        if let Some(preset) = preset {
+            let config = preset_config(preset);
             return Ok(Self {
                 method: defaults.method,
-                jacobian: defaults.config.jacobian,
-                support: defaults.config.support,
-                localizer: true,
+                jacobian: config.jacobian,
+                support: config.support,
+                preset: Some(preset),
             });
         }
         let (name, support) = match text.strip_suffix("+region") {
@@ -221,14 +236,16 @@ impl BenchMethod {
             method,
             jacobian,
             support,
-            localizer: false,
+            preset: None,
         })
     }
 
     /// The name it was parsed from (canonical form).
     pub fn name(&self) -> String {
-        if self.localizer {
-            return "localizer".into();
+        match self.preset {
+            Some(Preset::Localizer) => return "localizer".into(),
+            Some(Preset::Tracker) => return "tracker".into(),
+            None => {}
         }
         let mut name = match self.method {
             Method::Povs => "povs".to_string(),
@@ -240,15 +257,24 @@ impl BenchMethod {
         name
     }
 
-    /// Its optimiser settings: the localiser's, with this Jacobian and comparison, one
-    /// thread per run.
+    /// Its optimiser settings, one thread per run: a preset's, or the localiser's with
+    /// this Jacobian and comparison.
     pub fn config(&self) -> VvsConfig {
+        let base = preset_config(self.preset.unwrap_or(Preset::Localizer));
         VvsConfig {
             jacobian: self.jacobian,
             support: self.support,
             parallel: false,
-            ..Localizer::default().config
+            ..base
         }
+    }
+}
+
+/// The settings of a preset.
+fn preset_config(preset: Preset) -> VvsConfig {
+    match preset {
+        Preset::Localizer => Localizer::default().config,
+        Preset::Tracker => Tracker::default_config(),
     }
 }
 
