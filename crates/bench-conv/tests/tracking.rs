@@ -4,7 +4,7 @@ use bench_conv::tracking::{
     SequenceSpec, TrackingResults, read_csv, run_sequence, summarize, write_csv, write_results,
 };
 use test_support::workspace_root as root;
-use vvs::Prediction;
+use vvs::{Localizer, Prediction, Tracker, VvsConfig};
 use world::sequence::{Acquisition, Trajectory};
 
 /// The quick file relies on the models' defaults: they must be the full file's values.
@@ -48,6 +48,35 @@ fn sequence_fixtures_parse_and_share_the_same_sequence() {
             SequenceSpec::load(&root().join("fixtures/sequence-fig4-improved.toml")).unwrap();
         assert_eq!(improved.prediction, full_improved.prediction);
         assert_eq!(improved.recovery, full_improved.recovery);
+    }
+}
+
+/// The tracking ablations hold the localiser's and the tracker's settings as the
+/// library gives them, and track the improved sequence's frames as it does.
+#[test]
+fn the_tracking_ablations_hold_the_presets() {
+    let improved =
+        SequenceSpec::load(&root().join("fixtures/sequence-fig4-improved.toml")).unwrap();
+    for (name, preset) in [
+        ("tracking-localizer.toml", Localizer::default().config),
+        ("tracking-tracker.toml", Tracker::default_config()),
+    ] {
+        let spec = SequenceSpec::load(&root().join("fixtures/ablations").join(name)).unwrap();
+        assert_eq!(spec.trajectory, improved.trajectory, "{name}");
+        assert_eq!(spec.acquisition, improved.acquisition, "{name}");
+        assert_eq!(spec.frame_steps, improved.frame_steps, "{name}");
+        assert_eq!(spec.initial_offset, improved.initial_offset, "{name}");
+        assert_eq!(spec.prediction, improved.prediction, "{name}");
+        let config = spec.vvs_config().unwrap();
+        // Threads, the per-iteration history and the global search's settings (a
+        // tracker without recovery searches nothing) are the harness's.
+        let expected = VvsConfig {
+            parallel: config.parallel,
+            keep_history: config.keep_history,
+            global: config.global.clone(),
+            ..preset
+        };
+        assert_eq!(config, expected, "{name}");
     }
 }
 

@@ -5,6 +5,10 @@
 //! between the frames a tracker sees. A diverged alignment loses the track: the tracker
 //! keeps its last good estimate and aligns nothing more.
 //!
+//! A tracker aligns through the [`Servo`] it is given; [`Tracker::default_config`] is
+//! the settings to build it with: the localiser's, with step 1 from λ* = 7.5 (the
+//! camera moves little between frames).
+//!
 //! Beyond the paper, two settings, both off by default:
 //! - [`Prediction`]: each alignment starts from an extrapolation of the last two
 //!   estimates instead of the last one. For a hand-held camera, repeating the last
