@@ -181,7 +181,7 @@ pub struct Tracker<'a> {
 }
 
 impl<'a> Tracker<'a> {
-    /// The settings a tracker's [`Servo`] takes by default (beyond the paper): the
+    /// The settings to build a tracker's [`Servo`] with (beyond the paper): the
     /// [`crate::Localizer`]'s, with step 1 from λ* = 7.5 instead of 15 (then the λ
     /// schedule `[3]`). A tracker starts each alignment where the camera was a frame or
     /// a few before, well inside λ = 7.5's basin; λ = 15 widens the basin for starts
@@ -192,7 +192,11 @@ impl<'a> Tracker<'a> {
     /// 7-Scenes' held-out block (KinectFusion poses, 1 frame in 1 to 10) the largest
     /// error 13 cm against 22, never lost, a quarter less time. From λ* = 3 alone
     /// (`lambda_schedule` empty) a frame takes half the iterations and the city's
-    /// sequence is tracked to 1.5–1.6 cm, but tracks are lost with 1 frame in 10 or 20.
+    /// sequence is tracked to 1.5–1.7 cm, but tracks are lost with 1 frame in 10 or 20.
+    /// With a [`Recovery`], the search screens at this λ*₁ too (divided by
+    /// `global.search_downsampling`) and refines with this plan; for the localiser's
+    /// search, build the servo with `lambda_star_step1 = 15` and `lambda_schedule =
+    /// [7.5, 3]`.
     pub fn default_config() -> VvsConfig {
         VvsConfig {
             lambda_star_step1: 7.5,
