@@ -1,6 +1,6 @@
-//! The real-data benchmark's pose check and local maps on the house pictures of the
-//! shared data (`PGM_DATA_DIR`): each of pictures 3 to 5 left out of a cloud of the
-//! other two, at 320×240.
+//! The real-data benchmark: its method names, and its pose check and local maps on the
+//! house pictures of the shared data (`PGM_DATA_DIR`): each of pictures 3 to 5 left
+//! out of a cloud of the other two, at 320×240.
 
 use bench_conv::real::{RealSpec, run_benchmark};
 use test_support::{data_dir, workspace_root};
@@ -66,4 +66,51 @@ fn the_pose_check_and_local_maps_run_on_the_house() {
         assert!(r.error_m.is_finite() && r.to_reference_m.is_none(), "{r:?}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The benchmark's method names round-trip; `localizer` and `tracker` take the library's
+/// settings as they are, a rule the localiser's with its Jacobian and comparison; each
+/// on one thread.
+#[test]
+fn bench_methods_parse_and_take_their_settings() {
+    use bench_conv::real::{BenchMethod, Preset};
+    use vvs::{Localizer, Method, Support, Tracker, VvsConfig};
+    for name in [
+        "localizer",
+        "tracker",
+        "povs",
+        "rule2/convolved",
+        "rule0/paper",
+        "rule1/convolved+region",
+        "povs+region",
+    ] {
+        assert_eq!(BenchMethod::parse(name).unwrap().name(), name);
+    }
+    let one_thread = |config: VvsConfig| VvsConfig {
+        parallel: false,
+        ..config
+    };
+    let tracker = BenchMethod::parse("tracker").unwrap();
+    assert_eq!(tracker.preset, Some(Preset::Tracker));
+    assert_eq!(tracker.method, Method::Rule2);
+    assert_eq!(tracker.config(), one_thread(Tracker::default_config()));
+    assert_eq!(
+        BenchMethod::parse("localizer").unwrap().config(),
+        one_thread(Localizer::default().config)
+    );
+    let rule = BenchMethod::parse("rule1/paper+region").unwrap();
+    assert_eq!(
+        (rule.method, rule.support),
+        (Method::Rule1, Support::Region)
+    );
+    assert_eq!(
+        rule.config(),
+        one_thread(VvsConfig {
+            jacobian: rule.jacobian,
+            support: Support::Region,
+            ..Localizer::default().config
+        })
+    );
+    assert_ne!(rule.jacobian, Localizer::default().config.jacobian);
+    assert!(BenchMethod::parse("global").is_err());
 }
