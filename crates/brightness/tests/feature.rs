@@ -136,6 +136,15 @@ fn holed_scene() -> (Camera, Frame) {
     (camera, frame)
 }
 
+/// Whether each pixel of `frame` is a rendered point.
+fn hits(frame: &Frame) -> Vec<bool> {
+    frame
+        .status
+        .iter()
+        .map(|&s| s == PixelStatus::Hit)
+        .collect()
+}
+
 /// A feature sharing another's tables (`Brightness::sharing_tables`) computes what
 /// `Brightness::new` computes, bit for bit, after the other has computed something
 /// else; so does a PGM built on it (`Pgm::from_brightness` is `pgm`'s, tested there).
@@ -164,11 +173,7 @@ fn a_feature_sharing_tables_computes_what_a_new_one_does() {
 fn a_partly_observed_picture_is_normalised_and_differentiated_where_it_is_observed() {
     use frame::Restricted;
     let (camera, frame) = holed_scene();
-    let hits: Vec<bool> = frame
-        .status
-        .iter()
-        .map(|&s| s == PixelStatus::Hit)
-        .collect();
+    let hits = hits(&frame);
     let view = Restricted::new(&frame, &hits).unwrap();
     let mut feature = Brightness::new(&camera).with_normalization(true);
     feature.compute(&view).unwrap();
@@ -210,11 +215,7 @@ fn rows_against_a_picture_follow_the_edge_of_the_support() {
     use frame::Restricted;
     let (camera, frame) = holed_scene();
     let (w, h, n) = (64, 48, 64 * 48);
-    let hits: Vec<bool> = frame
-        .status
-        .iter()
-        .map(|&s| s == PixelStatus::Hit)
-        .collect();
+    let hits = hits(&frame);
     // The picture observes the region but a corner.
     let observed: Vec<bool> = (0..n)
         .map(|k| camera.valid_pixels()[k] && !(k % w > 45 && k / w > 30))
@@ -300,11 +301,7 @@ fn rows_against_a_picture_follow_the_edge_of_the_support() {
 fn the_image_alone_is_the_image_of_the_whole_computation() {
     use frame::Restricted;
     let (camera, frame) = holed_scene();
-    let hits: Vec<bool> = frame
-        .status
-        .iter()
-        .map(|&s| s == PixelStatus::Hit)
-        .collect();
+    let hits = hits(&frame);
     let all = vec![true; hits.len()];
     let mut other = frame.clone();
     other.intensity.iter_mut().for_each(|i| *i = 1.0 - *i);

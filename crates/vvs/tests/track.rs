@@ -23,6 +23,24 @@ fn truth(frames: usize) -> Vec<Isometry3> {
         .collect()
 }
 
+/// The pictures `camera` takes at `truth`, 30 a second: rendered, then acquired (the
+/// acquisition simulator without vignetting).
+fn measured_pictures(camera: &ucm::Camera, truth: &[Isometry3]) -> Vec<Image> {
+    let mut servo = Servo::new(&city().cloud, camera, config()).unwrap();
+    let acquisition = Acquisition {
+        vignetting: 0.0,
+        ..Acquisition::default()
+    };
+    truth
+        .iter()
+        .enumerate()
+        .map(|(k, pose)| {
+            let rendered = servo.render(pose).unwrap();
+            acquisition.acquire(&rendered, camera, k, k as f64 / 30.0)
+        })
+        .collect()
+}
+
 fn config() -> VvsConfig {
     VvsConfig {
         keep_history: false,
@@ -37,19 +55,7 @@ fn config() -> VvsConfig {
 fn tracks_measured_pictures_one_frame_in_n() {
     let camera = fixture();
     let truth = truth(7);
-    let mut servo = Servo::new(&city().cloud, &camera, config()).unwrap();
-    let acquisition = Acquisition {
-        vignetting: 0.0,
-        ..Acquisition::default()
-    };
-    let pictures: Vec<Image> = truth
-        .iter()
-        .enumerate()
-        .map(|(k, pose)| {
-            let rendered = servo.render(pose).unwrap();
-            acquisition.acquire(&rendered, &camera, k, k as f64 / 30.0)
-        })
-        .collect();
+    let pictures = measured_pictures(&camera, &truth);
     for (method, step) in [(Method::Rule2, 1), (Method::Rule2, 3), (Method::Povs, 1)] {
         let servo = Servo::new(
             &city().cloud,
@@ -329,19 +335,7 @@ fn recovery_searches_again_after_a_failed_alignment() {
 fn the_tracker_defaults_follow_as_closely_in_fewer_iterations() {
     let camera = fixture();
     let truth = truth(5);
-    let mut servo = Servo::new(&city().cloud, &camera, config()).unwrap();
-    let acquisition = Acquisition {
-        vignetting: 0.0,
-        ..Acquisition::default()
-    };
-    let pictures: Vec<Image> = truth
-        .iter()
-        .enumerate()
-        .map(|(k, pose)| {
-            let rendered = servo.render(pose).unwrap();
-            acquisition.acquire(&rendered, &camera, k, k as f64 / 30.0)
-        })
-        .collect();
+    let pictures = measured_pictures(&camera, &truth);
     let start =
         truth[0] * Isometry3::from_pose_vector([0.03, -0.02, 0.01, 0.0, 0.0, 0.01]).unwrap();
     let track = |config: VvsConfig| {

@@ -676,7 +676,6 @@ fn distinct_best(
 
 #[cfg(test)]
 mod tests {
-    use splat::PointCloud;
     use ucm::Camera;
 
     use super::*;
@@ -686,17 +685,7 @@ mod tests {
     /// support's lists: neither keeps the scores of the node screened before it.
     #[test]
     fn a_node_outside_the_cloud_is_no_candidate() {
-        let positions: Vec<DVec3> = (0..400)
-            .map(|k| DVec3::new(f64::from(k % 20) * 0.1, f64::from(k / 20) * 0.1, 0.0))
-            .collect();
-        let intensities: Vec<f32> = positions.iter().map(|p| (p.x * 0.4) as f32).collect();
-        let cloud =
-            PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, None).unwrap();
-        let camera = Camera::load_toml(
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../fixtures/omni-320x240.toml"),
-        )
-        .unwrap();
+        let (cloud, camera) = crate::servo::test_plane();
         let config = VvsConfig {
             support: Support::Common,
             ..VvsConfig::default()

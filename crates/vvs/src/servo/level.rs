@@ -125,17 +125,7 @@ mod tests {
     /// rendering too.
     #[test]
     fn a_frame_is_rendered_once_per_pose() {
-        let positions: Vec<DVec3> = (0..400)
-            .map(|k| DVec3::new(f64::from(k % 20) * 0.1, f64::from(k / 20) * 0.1, 0.0))
-            .collect();
-        let intensities: Vec<f32> = positions.iter().map(|p| (p.x * 0.4) as f32).collect();
-        let cloud =
-            PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, None).unwrap();
-        let camera = Camera::load_toml(
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../fixtures/omni-320x240.toml"),
-        )
-        .unwrap();
+        let (cloud, camera) = crate::servo::test_plane();
         let mut level = Level::new(camera, &VvsConfig::default()).unwrap();
         let Level {
             renderer,

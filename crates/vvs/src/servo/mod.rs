@@ -313,3 +313,20 @@ impl<'a> Servo<'a> {
         Ok(outcome)
     }
 }
+
+/// A scene for unit tests: 400 points 0.1 m apart on a 2 m square of the plane z = 0,
+/// brighter along x, and the 320×240 fixture camera.
+#[cfg(test)]
+pub(crate) fn test_plane() -> (PointCloud, Camera) {
+    let positions: Vec<DVec3> = (0..400)
+        .map(|k| DVec3::new(f64::from(k % 20) * 0.1, f64::from(k / 20) * 0.1, 0.0))
+        .collect();
+    let intensities: Vec<f32> = positions.iter().map(|p| (p.x * 0.4) as f32).collect();
+    let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, None)
+        .expect("a valid cloud");
+    let camera = Camera::load_toml(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/omni-320x240.toml"),
+    )
+    .expect("the fixture camera");
+    (cloud, camera)
+}
