@@ -151,6 +151,15 @@ pub struct VvsConfig {
     pub intermediate_stall_window: Option<usize>,
     /// Relative decrease of the cost the last `stall_window` iterations must achieve.
     pub stall_relative_decrease: f64,
+    /// Beyond the paper (`None`: off): a stage has also converged when its last update
+    /// moves the image by less than this many pixels of its pyramid level,
+    /// `α (‖t‖ / ρ̄ + ‖ω‖)`, and changes λ by less than this many pixels: `α` the larger
+    /// focal length of the level's camera, `1/ρ̄` the mean inverse range of the
+    /// rendering's hits, `t` and `ω` the update's translation and rotation. Scale-free,
+    /// unlike the thresholds in metres and radians above: a motion far below a pixel is
+    /// not an error the image can show. Every stage but the global search's
+    /// low-resolution descents (ranked after a set number of iterations).
+    pub converged_px: Option<f32>,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
     pub divergence_cost_factor: f64,
     /// Divergence: fewer than this fraction of the valid pixels see a point.
@@ -224,6 +233,7 @@ impl Default for VvsConfig {
             stall_window: 10,
             intermediate_stall_window: None,
             stall_relative_decrease: 0.01,
+            converged_px: None,
             divergence_cost_factor: 1e3,
             min_hit_fraction: 0.02,
             bounds_margin_m: 5.0,
@@ -311,6 +321,11 @@ impl VvsConfig {
             && !(c > 0.0 && c.is_finite())
         {
             return bad("robust", format!("Tukey c must be > 0, got {c}"));
+        }
+        if let Some(px) = self.converged_px
+            && !(px > 0.0 && px.is_finite())
+        {
+            return bad("converged_px", format!("must be > 0, got {px}"));
         }
         if !(0.0..1.0).contains(&self.stall_relative_decrease) {
             return bad(

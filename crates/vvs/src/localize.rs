@@ -99,8 +99,11 @@ pub struct Localizer {
     /// 3.75 and 1.5 there); a stage converged once a step moves the camera by less than
     /// 0.5 mm and 0.1 mrad (`converged_translation_m`, `converged_rotation_rad`: with
     /// steps of gain 1, the paper's 20 µm are below the renderings' noise and the
-    /// stall test ends every run). The same convergence domain on the synthetic city,
-    /// in a third of the time (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
+    /// stall test ends every run), or moves the image by less than 0.05 pixel of the
+    /// stage's level (`converged_px`: a street seen from metres away, or a picture at
+    /// half the resolution, settles below 0.5 mm only after steps that change nothing
+    /// it can show). The same convergence domain on the synthetic city, in a quarter
+    /// of the time (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`): on two cores the
     /// renderer's parallel passes take more than twice one thread's time; set it where
     /// many cores may repay them (the results are the same bits either way). With a
@@ -137,6 +140,7 @@ impl Default for Localizer {
                 coarse_min_lambda_px: Some(1.5),
                 converged_translation_m: 5e-4,
                 converged_rotation_rad: 1e-4,
+                converged_px: Some(0.05),
                 keep_history: false,
                 parallel: false,
                 global: GlobalConfig {

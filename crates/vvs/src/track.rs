@@ -183,24 +183,26 @@ pub struct Tracker<'a> {
 impl<'a> Tracker<'a> {
     /// The settings to build a tracker's [`Servo`] with (beyond the paper): the
     /// [`crate::Localizer`]'s, with step 1 from λ* = 7.5 instead of 15 (then the λ
-    /// schedule `[3]`). A tracker starts each alignment where the camera was a frame or
-    /// a few before, well inside λ = 7.5's basin; λ = 15 widens the basin for starts
-    /// metres away, but its optimum lies centimetres from the picture's and step 2
-    /// does not always come back. Measured (`docs/RESULTS.md`, "Tracking"): on the
-    /// city's shaken sequence with 1 frame in 1 to 20, RMSE 1.5–3.4 cm against the
-    /// localiser's 1.5–3.6, in 20–24 iterations a frame against 27–30, never lost; on
-    /// 7-Scenes' held-out block (KinectFusion poses, 1 frame in 1 to 10) the largest
-    /// error 13 cm against 22, never lost, a quarter less time. From λ* = 3 alone
-    /// (`lambda_schedule` empty) a frame takes half the iterations and the city's
-    /// sequence is tracked to 1.5–1.7 cm, but tracks are lost with 1 frame in 10 or 20.
+    /// schedule `[3]`), each stage at the coarsest of three pyramid levels where its λ*
+    /// stays 1.5 pixels (`pyramid_levels = 3`: at 640×480, λ* = 7.5 at 160×120 and 3 at
+    /// 320×240). A tracker starts each alignment where the camera was a frame or a few
+    /// before, well inside λ = 7.5's basin; λ = 15 widens the basin for starts metres
+    /// away, but its optimum lies centimetres from the picture's and step 2 does not
+    /// always come back. Measured (`docs/RESULTS.md`, "Tracking"): on the city's shaken
+    /// sequence with 1 frame in 1 to 20, RMSE 1.6–2.4 cm against the localiser's
+    /// 1.6–3.4, in 14–16 iterations a frame against 21–25, never lost; on 7-Scenes'
+    /// held-out block (KinectFusion poses, 1 frame in 1 to 10) the largest error 13 cm
+    /// against 22, never lost, in less time. From λ* = 3 alone
+    /// (`lambda_schedule` empty) tracks are lost with 1 frame in 10 or 20.
     /// With a [`Recovery`], the search screens at this λ*₁ too (divided by
     /// `global.search_downsampling`) and refines with this plan; for the localiser's
-    /// search, build the servo with `lambda_star_step1 = 15` and `lambda_schedule =
-    /// [7.5, 3]`.
+    /// search, build the servo with `lambda_star_step1 = 15`, `lambda_schedule =
+    /// [7.5, 3]` and `pyramid_levels = 2`.
     pub fn default_config() -> VvsConfig {
         VvsConfig {
             lambda_star_step1: 7.5,
             lambda_schedule: vec![3.0],
+            pyramid_levels: 3,
             ..crate::Localizer::default().config
         }
     }

@@ -12,6 +12,7 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         coarse_min_lambda_px: Some(1.5),
         lambda_schedule: vec![7.5, 3.0],
         stall_window: 0,
+        converged_px: Some(0.05),
         pgm_recursive_from_lambda: f32::INFINITY,
         ..VvsConfig::default()
     };
@@ -61,6 +62,9 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         ("coarse_min_lambda_px = 0.1", "coarse_min_lambda_px"),
         ("coarse_min_lambda_px = nan", "coarse_min_lambda_px"),
         ("stall_relative_decrease = 1.5", "stall_relative_decrease"),
+        ("converged_px = 0.0", "converged_px"),
+        ("converged_px = -1.0", "converged_px"),
+        ("converged_px = inf", "converged_px"),
         (
             "step1_max_iterations = 2\nlambda_schedule = [7.5, 3.0]",
             "step1_max_iterations",

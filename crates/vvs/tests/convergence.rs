@@ -361,11 +361,13 @@ fn run_methods_shares_step1_without_changing_any_outcome() {
 }
 
 /// The localiser's short stall window in step 1 (`intermediate_stall_window`): the same
-/// place as step 1 run with the full window, in fewer iterations; step 2 keeps its own.
+/// place as step 1 run with the full window, in fewer iterations; step 2 keeps its own
+/// (the tests in pixels off: they end these stages sooner still, the next test).
 #[test]
 fn a_short_stall_window_in_step_one_ends_at_the_same_place_sooner() {
     let full = VvsConfig {
         intermediate_stall_window: None,
+        converged_px: None,
         keep_history: false,
         ..vvs::Localizer::default().config
     };
@@ -392,4 +394,36 @@ fn a_short_stall_window_in_step_one_ends_at_the_same_place_sooner() {
         b.iterations,
         a.iterations
     );
+}
+
+/// The localiser's test in pixels (`converged_px`): the same place as with the
+/// thresholds in metres and the stall test alone, in fewer iterations.
+#[test]
+fn convergence_in_pixels_ends_at_the_same_place_sooner() {
+    let metric = VvsConfig {
+        converged_px: None,
+        keep_history: true,
+        ..vvs::Localizer::default().config
+    };
+    let pixels = VvsConfig {
+        keep_history: true,
+        ..vvs::Localizer::default().config
+    };
+    assert!(pixels.converged_px.is_some());
+    let mut servo = Servo::new(&city().cloud, &fixture(), metric).unwrap();
+    let desired = servo.render(&desired_pose()).unwrap();
+    let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
+    let a = servo.run(Method::Rule2, &desired, start).unwrap();
+    let mut servo = Servo::new(&city().cloud, &fixture(), pixels).unwrap();
+    let b = servo.run(Method::Rule2, &desired, start).unwrap();
+    let (ta, _) = a.world_from_camera.distance_to(&desired_pose());
+    let (tb, _) = b.world_from_camera.distance_to(&desired_pose());
+    let (na, nb): (usize, usize) = (a.iterations.iter().sum(), b.iterations.iter().sum());
+    eprintln!(
+        "metres: {ta} m, {:?}; pixels: {tb} m, {:?}",
+        a.iterations, b.iterations
+    );
+    assert_eq!(b.stop, StopReason::Converged);
+    assert!(ta < 0.005 && tb < 0.005, "{ta} m, {tb} m");
+    assert!(3 * nb <= 2 * na, "{nb} against {na} iterations");
 }

@@ -568,6 +568,7 @@ impl Benchmark {
                 levenberg_marquardt: paper.levenberg_marquardt,
                 converged_translation_m: paper.converged_translation_m,
                 converged_rotation_rad: paper.converged_rotation_rad,
+                converged_px: paper.converged_px,
                 ..BenchMethod::parse("povs")?.config()
             };
             let outcome =

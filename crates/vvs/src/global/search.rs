@@ -159,6 +159,7 @@ impl<'a> Servo<'a> {
             cap: settings.descent_iterations,
             last_of_step: true,
             stall_window: self.config.stall_window,
+            converged_px: None,
         };
         let identity = angles.iter().position(|o| *o == [0.0; 3]);
         // With pruning, every descent first runs `first` iterations, then the best

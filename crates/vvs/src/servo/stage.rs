@@ -7,7 +7,7 @@ use brightness::{Against, Brightness, normal_equations, normal_equations_with_co
 use frame::{AnyImage, Frame, PixelStatus, Restricted};
 use glam::DVec3;
 use pgm::Pgm;
-use ucm::Isometry3;
+use ucm::{Camera, Isometry3};
 
 use super::{Level, render_once};
 use crate::solve::solve;
@@ -43,6 +43,9 @@ pub(crate) struct Planned {
     /// The stall test's window for this stage (`VvsConfig::stall_window`, or
     /// `intermediate_stall_window` for step 1's stages before a step 2).
     pub(crate) stall_window: usize,
+    /// The image motion below which an update ends the stage
+    /// (`VvsConfig::converged_px`).
+    pub(crate) converged_px: Option<f32>,
 }
 
 /// How a stage ended: why, with which λ and cost, after how many iterations.
@@ -66,6 +69,7 @@ pub(crate) fn plan(c: &VvsConfig, method: Method) -> Vec<Planned> {
             cap: c.max_iterations,
             last_of_step: true,
             stall_window: c.stall_window,
+            converged_px: c.converged_px,
         }];
     }
     let first_lambda_factor = if method == Method::Rule0 {
@@ -120,6 +124,7 @@ pub(crate) fn plan(c: &VvsConfig, method: Method) -> Vec<Planned> {
             },
             last_of_step: i + 1 == n,
             stall_window: c.intermediate_stall_window.unwrap_or(c.stall_window),
+            converged_px: c.converged_px,
         })
         .collect();
     planned.push(Planned {
@@ -133,6 +138,7 @@ pub(crate) fn plan(c: &VvsConfig, method: Method) -> Vec<Planned> {
         cap: c.max_iterations - c.step1_max_iterations,
         last_of_step: true,
         stall_window: c.stall_window,
+        converged_px: c.converged_px,
     });
     planned
 }
@@ -153,6 +159,7 @@ impl Servo<'_> {
             step: stage_number,
             level,
             stall_window,
+            converged_px,
             ..
         } = planned;
         let Level {
@@ -457,6 +464,12 @@ impl Servo<'_> {
                 {
                     break 'stage (StopReason::Converged, iteration + 1);
                 }
+                if let Some(px) = converged_px
+                    && lambda_dot.abs() < px
+                    && image_motion_px(camera, frame, update_t, update_r) < f64::from(px)
+                {
+                    break 'stage (StopReason::Converged, iteration + 1);
+                }
             }
             (StopReason::IterationBudget, budget)
         };
@@ -483,6 +496,26 @@ fn compute_feature(
         Stage::Pgm { .. } => pgm.compute(picture, lambda, jacobian)?,
     }
     Ok(())
+}
+
+/// How far an update of `translation_m` and `rotation_rad` moves the image of what
+/// `frame` sees, in pixels of `camera`: `α (‖t‖ / ρ̄ + ‖ω‖)`, `α` the larger focal
+/// length, `1/ρ̄` the mean inverse range of the frame's hits (0 without any).
+fn image_motion_px(camera: &Camera, frame: &Frame, translation_m: f64, rotation_rad: f64) -> f64 {
+    let (mut inverse_sum, mut hits) = (0.0f64, 0usize);
+    for (&range_m, &status) in frame.range_m.iter().zip(&frame.status) {
+        if status == PixelStatus::Hit && range_m > 0.0 {
+            inverse_sum += 1.0 / f64::from(range_m);
+            hits += 1;
+        }
+    }
+    let mean_inverse_range = if hits == 0 {
+        0.0
+    } else {
+        inverse_sum / hits as f64
+    };
+    let i = camera.intrinsics();
+    i.alpha_u.max(i.alpha_v) * (translation_m * mean_inverse_range + rotation_rad)
 }
 
 /// Whether `position` lies outside the box `bounds` (lowest, highest corner) enlarged by
@@ -526,5 +559,41 @@ fn tukey_weights(residuals: &[f32], c: f32, weights: &mut [f32], scratch: &mut V
         } else {
             0.0
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `α (‖t‖ / ρ̄ + ‖ω‖)`: `1/ρ̄` the mean inverse range of the hits alone, `α` the
+    /// level's (halved at half the resolution).
+    #[test]
+    fn image_motion_is_in_pixels_of_the_level() {
+        let (_, camera) = crate::servo::test_plane();
+        let alpha = camera.intrinsics().alpha_u.max(camera.intrinsics().alpha_v);
+        let mut frame = Frame::for_camera(&camera);
+        frame.status.fill(PixelStatus::Sky);
+        // No hit: the rotation alone.
+        assert_eq!(image_motion_px(&camera, &frame, 0.5, 0.01), alpha * 0.01);
+        // Hits at 1 m and 4 m: a mean inverse range of 0.625 /m; a masked pixel's
+        // range is not read.
+        frame.status[0] = PixelStatus::Hit;
+        frame.range_m[0] = 1.0;
+        frame.status[1] = PixelStatus::Hit;
+        frame.range_m[1] = 4.0;
+        frame.status[2] = PixelStatus::Masked;
+        frame.range_m[2] = 0.001;
+        let px = image_motion_px(&camera, &frame, 0.02, 0.001);
+        assert!((px - alpha * (0.02 * 0.625 + 0.001)).abs() < 1e-12, "{px}");
+        let half = camera.downsampled(2).unwrap();
+        let mut small = Frame::for_camera(&half);
+        small.status.fill(PixelStatus::Sky);
+        small.status[0] = PixelStatus::Hit;
+        small.range_m[0] = 2.0;
+        let px_half = image_motion_px(&half, &small, 0.02, 0.0);
+        let alpha_half = half.intrinsics().alpha_u.max(half.intrinsics().alpha_v);
+        assert!((alpha_half - alpha / 2.0).abs() < 1e-9);
+        assert!((px_half - alpha_half * 0.01).abs() < 1e-12);
     }
 }
