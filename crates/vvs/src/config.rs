@@ -157,8 +157,13 @@ pub struct VvsConfig {
     /// focal length of the level's camera, `1/ρ̄` the mean inverse range of the
     /// rendering's hits, `t` and `ω` the update's translation and rotation. Scale-free,
     /// unlike the thresholds in metres and radians above: a motion far below a pixel is
-    /// not an error the image can show. Every stage but the global search's
-    /// low-resolution descents (ranked after a set number of iterations).
+    /// not an error the image can show. The pixels are a pinhole's at the optical axis:
+    /// a unified camera magnifies some directions more (up to 3.4 times at 120° off the
+    /// axis for ξ = 0.9). Like the thresholds above it bounds the last step, not the
+    /// distance left: with a gain below 1 or damping, a stage ends about that step
+    /// divided by the gain away; and it ignores the vignetting's coefficients. Every
+    /// stage but the global search's low-resolution descents (ranked after a set
+    /// number of iterations).
     pub converged_px: Option<f32>,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
     pub divergence_cost_factor: f64,

@@ -102,8 +102,8 @@ pub struct Localizer {
     /// stall test ends every run), or moves the image by less than 0.05 pixel of the
     /// stage's level (`converged_px`: a street seen from metres away, or a picture at
     /// half the resolution, settles below 0.5 mm only after steps that change nothing
-    /// it can show). The same convergence domain on the synthetic city, in a quarter
-    /// of the time (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
+    /// it can show). On the synthetic city the paper's settings' convergence domain, in
+    /// a quarter of their iterations (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`): on two cores the
     /// renderer's parallel passes take more than twice one thread's time; set it where
     /// many cores may repay them (the results are the same bits either way). With a

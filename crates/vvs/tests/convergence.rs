@@ -402,13 +402,9 @@ fn a_short_stall_window_in_step_one_ends_at_the_same_place_sooner() {
 fn convergence_in_pixels_ends_at_the_same_place_sooner() {
     let metric = VvsConfig {
         converged_px: None,
-        keep_history: true,
         ..vvs::Localizer::default().config
     };
-    let pixels = VvsConfig {
-        keep_history: true,
-        ..vvs::Localizer::default().config
-    };
+    let pixels = vvs::Localizer::default().config;
     assert!(pixels.converged_px.is_some());
     let mut servo = Servo::new(&city().cloud, &fixture(), metric).unwrap();
     let desired = servo.render(&desired_pose()).unwrap();
@@ -425,5 +421,7 @@ fn convergence_in_pixels_ends_at_the_same_place_sooner() {
     );
     assert_eq!(b.stop, StopReason::Converged);
     assert!(ta < 0.005 && tb < 0.005, "{ta} m, {tb} m");
+    let (apart, _) = a.world_from_camera.distance_to(&b.world_from_camera);
+    assert!(apart < 0.002, "{apart} m apart");
     assert!(3 * nb <= 2 * na, "{nb} against {na} iterations");
 }

@@ -465,8 +465,7 @@ impl Servo<'_> {
                     break 'stage (StopReason::Converged, iteration + 1);
                 }
                 if let Some(px) = converged_px
-                    && lambda_dot.abs() < px
-                    && image_motion_px(camera, frame, update_t, update_r) < f64::from(px)
+                    && converged_in_pixels(px, lambda_dot, camera, frame, update_t, update_r)
                 {
                     break 'stage (StopReason::Converged, iteration + 1);
                 }
@@ -498,9 +497,24 @@ fn compute_feature(
     Ok(())
 }
 
+/// `VvsConfig::converged_px`'s test: an update changes λ by less than `px` pixels and
+/// moves the image of what `frame` sees by less than `px` ([`image_motion_px`]).
+fn converged_in_pixels(
+    px: f32,
+    lambda_dot: f32,
+    camera: &Camera,
+    frame: &Frame,
+    translation_m: f64,
+    rotation_rad: f64,
+) -> bool {
+    lambda_dot.abs() < px
+        && image_motion_px(camera, frame, translation_m, rotation_rad) < f64::from(px)
+}
+
 /// How far an update of `translation_m` and `rotation_rad` moves the image of what
 /// `frame` sees, in pixels of `camera`: `α (‖t‖ / ρ̄ + ‖ω‖)`, `α` the larger focal
-/// length, `1/ρ̄` the mean inverse range of the frame's hits (0 without any).
+/// length, `1/ρ̄` the mean inverse range of the frame's hits with a positive range
+/// (infinite without any: a translation's effect is then unknown).
 fn image_motion_px(camera: &Camera, frame: &Frame, translation_m: f64, rotation_rad: f64) -> f64 {
     let (mut inverse_sum, mut hits) = (0.0f64, 0usize);
     for (&range_m, &status) in frame.range_m.iter().zip(&frame.status) {
@@ -509,11 +523,10 @@ fn image_motion_px(camera: &Camera, frame: &Frame, translation_m: f64, rotation_
             hits += 1;
         }
     }
-    let mean_inverse_range = if hits == 0 {
-        0.0
-    } else {
-        inverse_sum / hits as f64
-    };
+    if hits == 0 {
+        return f64::INFINITY;
+    }
+    let mean_inverse_range = inverse_sum / hits as f64;
     let i = camera.intrinsics();
     i.alpha_u.max(i.alpha_v) * (translation_m * mean_inverse_range + rotation_rad)
 }
@@ -567,25 +580,59 @@ mod tests {
     use super::*;
 
     /// `α (‖t‖ / ρ̄ + ‖ω‖)`: `1/ρ̄` the mean inverse range of the hits alone, `α` the
-    /// level's (halved at half the resolution).
+    /// level's (halved at half the resolution); the test also bounds λ's change.
     #[test]
     fn image_motion_is_in_pixels_of_the_level() {
         let (_, camera) = crate::servo::test_plane();
         let alpha = camera.intrinsics().alpha_u.max(camera.intrinsics().alpha_v);
         let mut frame = Frame::for_camera(&camera);
         frame.status.fill(PixelStatus::Sky);
-        // No hit: the rotation alone.
-        assert_eq!(image_motion_px(&camera, &frame, 0.5, 0.01), alpha * 0.01);
+        // No hit: any motion may be large, the test never passes.
+        assert_eq!(image_motion_px(&camera, &frame, 0.0, 0.0), f64::INFINITY);
+        assert!(!converged_in_pixels(1.0, 0.0, &camera, &frame, 0.0, 0.0));
         // Hits at 1 m and 4 m: a mean inverse range of 0.625 /m; a masked pixel's
-        // range is not read.
+        // range, and a hit's without a positive range, are not read.
         frame.status[0] = PixelStatus::Hit;
         frame.range_m[0] = 1.0;
         frame.status[1] = PixelStatus::Hit;
         frame.range_m[1] = 4.0;
         frame.status[2] = PixelStatus::Masked;
         frame.range_m[2] = 0.001;
+        frame.status[3] = PixelStatus::Hit;
+        frame.range_m[3] = f32::NAN;
+        frame.status[4] = PixelStatus::Hit;
+        frame.range_m[4] = 0.0;
         let px = image_motion_px(&camera, &frame, 0.02, 0.001);
         assert!((px - alpha * (0.02 * 0.625 + 0.001)).abs() < 1e-12, "{px}");
+        // The test: both the image's motion and λ's change below the threshold.
+        assert!(converged_in_pixels(
+            px as f32 * 1.01,
+            0.0,
+            &camera,
+            &frame,
+            0.02,
+            0.001
+        ));
+        assert!(!converged_in_pixels(
+            px as f32 * 0.99,
+            0.0,
+            &camera,
+            &frame,
+            0.02,
+            0.001
+        ));
+        let wide = px as f32 * 1.01;
+        assert!(!converged_in_pixels(
+            wide, -wide, &camera, &frame, 0.02, 0.001
+        ));
+        assert!(converged_in_pixels(
+            wide,
+            -0.99 * wide,
+            &camera,
+            &frame,
+            0.02,
+            0.001
+        ));
         let half = camera.downsampled(2).unwrap();
         let mut small = Frame::for_camera(&half);
         small.status.fill(PixelStatus::Sky);
