@@ -360,6 +360,20 @@ fn run_methods_shares_step1_without_changing_any_outcome() {
     );
 }
 
+/// Rule2 with each configuration, on the desired pose's own rendering, from 0.5 m and
+/// 5° away: the outcome and its distance to the truth (m).
+fn rule2_from_half_a_metre(configs: [VvsConfig; 2]) -> [(vvs::Outcome, f64); 2] {
+    let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
+    let mut desired = None;
+    configs.map(|config| {
+        let mut servo = Servo::new(&city().cloud, &fixture(), config).unwrap();
+        let desired = desired.get_or_insert_with(|| servo.render(&desired_pose()).unwrap());
+        let outcome = servo.run(Method::Rule2, &*desired, start).unwrap();
+        let (t, _) = outcome.world_from_camera.distance_to(&desired_pose());
+        (outcome, t)
+    })
+}
+
 /// The localiser's short stall window in step 1 (`intermediate_stall_window`): the same
 /// place as step 1 run with the full window, in fewer iterations; step 2 keeps its own
 /// (the tests in pixels off: they end these stages sooner still, the next test).
@@ -375,14 +389,7 @@ fn a_short_stall_window_in_step_one_ends_at_the_same_place_sooner() {
         intermediate_stall_window: Some(3),
         ..full.clone()
     };
-    let mut servo = Servo::new(&city().cloud, &fixture(), full.clone()).unwrap();
-    let desired = servo.render(&desired_pose()).unwrap();
-    let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
-    let a = servo.run(Method::Rule2, &desired, start).unwrap();
-    let mut servo = Servo::new(&city().cloud, &fixture(), short).unwrap();
-    let b = servo.run(Method::Rule2, &desired, start).unwrap();
-    let (ta, _) = a.world_from_camera.distance_to(&desired_pose());
-    let (tb, _) = b.world_from_camera.distance_to(&desired_pose());
+    let [(a, ta), (b, tb)] = rule2_from_half_a_metre([full, short]);
     eprintln!(
         "full window: {ta} m, {:?}; short: {tb} m, {:?}",
         a.iterations, b.iterations
@@ -406,14 +413,7 @@ fn convergence_in_pixels_ends_at_the_same_place_sooner() {
     };
     let pixels = vvs::Localizer::default().config;
     assert!(pixels.converged_px.is_some());
-    let mut servo = Servo::new(&city().cloud, &fixture(), metric).unwrap();
-    let desired = servo.render(&desired_pose()).unwrap();
-    let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
-    let a = servo.run(Method::Rule2, &desired, start).unwrap();
-    let mut servo = Servo::new(&city().cloud, &fixture(), pixels).unwrap();
-    let b = servo.run(Method::Rule2, &desired, start).unwrap();
-    let (ta, _) = a.world_from_camera.distance_to(&desired_pose());
-    let (tb, _) = b.world_from_camera.distance_to(&desired_pose());
+    let [(a, ta), (b, tb)] = rule2_from_half_a_metre([metric, pixels]);
     let (na, nb): (usize, usize) = (a.iterations.iter().sum(), b.iterations.iter().sum());
     eprintln!(
         "metres: {ta} m, {:?}; pixels: {tb} m, {:?}",

@@ -507,7 +507,11 @@ fn converged_in_pixels(
     translation_m: f64,
     rotation_rad: f64,
 ) -> bool {
+    let i = camera.intrinsics();
+    // The rotation's motion alone bounds the whole from below: when it does not pass,
+    // the frame's ranges need not be read.
     lambda_dot.abs() < px
+        && i.alpha_u.max(i.alpha_v) * rotation_rad < f64::from(px)
         && image_motion_px(camera, frame, translation_m, rotation_rad) < f64::from(px)
 }
 
@@ -633,6 +637,9 @@ mod tests {
             0.02,
             0.001
         ));
+        // A rotation alone moving the image by more fails whatever the ranges.
+        let turn = f64::from(wide) / alpha * 1.01;
+        assert!(!converged_in_pixels(wide, 0.0, &camera, &frame, 0.0, turn));
         let half = camera.downsampled(2).unwrap();
         let mut small = Frame::for_camera(&half);
         small.status.fill(PixelStatus::Sky);
