@@ -784,6 +784,14 @@ impl Pgm {
         &self.brightness
     }
 
+    /// The brightness stage, to compute the brightness feature of the same camera and
+    /// normalisation with its buffers (as an optimiser running PoVS and PGM stages in
+    /// turn does, without a second set of buffers). The PGM's next computation
+    /// overwrites what it holds.
+    pub fn brightness_mut(&mut self) -> &mut Brightness {
+        &mut self.brightness
+    }
+
     /// The options.
     pub fn options(&self) -> &PgmOptions {
         &self.options

@@ -200,21 +200,7 @@ impl Renderer {
         let n = region.len();
         // The range of angles off the optical axis seen by the valid pixels, widened by
         // a pixel's angle.
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let w = camera.width() as usize;
-        for (k, _) in camera
-            .valid_pixels()
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| **v)
-        {
-            let pixel = [(k % w) as f64, (k / w) as f64];
-            if let Ok(ray) = camera.unproject(pixel) {
-                let theta = ray[2].clamp(-1.0, 1.0).acos();
-                lo = lo.min(theta);
-                hi = hi.max(theta);
-            }
-        }
+        let (lo, hi) = theta_range(&camera);
         let i = camera.intrinsics();
         let margin = 2.0 / i.alpha_u.min(i.alpha_v);
         let (theta_min, theta_max) = if lo <= hi {
@@ -226,7 +212,7 @@ impl Renderer {
             (0.0, std::f32::consts::PI)
         };
         let tile_count = tiles(region.width) * tiles(region.height);
-        let valid = camera.valid_pixels();
+        let (valid, w) = (camera.valid_pixels(), camera.width() as usize);
         let valid_bits: Vec<u32> = (0..n)
             .map(|k| {
                 let (u, v) = (region.u0 + k % region.width, region.v0 + k / region.width);
@@ -405,6 +391,79 @@ impl Renderer {
             pixels_hit,
         }
     }
+}
+
+/// The least and greatest angles off the optical axis (radians) of the rays of
+/// `camera`'s valid pixels that it can unproject (`(∞, −∞)` if none), as a scan of
+/// every such pixel computes them, bit for bit. Without lens distortion the angle
+/// grows with the normalised radius (the unified model's lift), so only the pixels
+/// whose squared radius ties the least or the greatest, to far more than its
+/// rounding, are unprojected; a tie that cannot be unprojected (past the fold of a
+/// mirror with `ξ > 1`) and lens distortion fall back to the scan.
+fn theta_range(camera: &Camera) -> (f64, f64) {
+    let w = camera.width() as usize;
+    let pixel = |k: usize| [(k % w) as f64, (k / w) as f64];
+    let valid = || {
+        camera
+            .valid_pixels()
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| **v)
+            .map(|(k, _)| k)
+    };
+    let theta = |k: usize| {
+        camera
+            .unproject(pixel(k))
+            .ok()
+            .map(|ray| ray[2].clamp(-1.0, 1.0).acos())
+    };
+    let scan = || {
+        valid()
+            .filter_map(theta)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+                (lo.min(t), hi.max(t))
+            })
+    };
+    if camera.distortion().is_some() {
+        return scan();
+    }
+    let squared_radius = |k: usize| {
+        camera
+            .normalized_from_pixel(pixel(k))
+            .ok()
+            .map(|[x, y]| x * x + y * y)
+    };
+    let (least, greatest) = valid()
+        .filter_map(squared_radius)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r2| {
+            (lo.min(r2), hi.max(r2))
+        });
+    if least > greatest {
+        return scan();
+    }
+    const TIE: f64 = 1e-9;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for k in valid() {
+        let Some(r2) = squared_radius(k) else {
+            continue;
+        };
+        let (near_least, near_greatest) = (
+            r2 <= least * (1.0 + TIE) + 1e-300,
+            r2 >= greatest * (1.0 - TIE),
+        );
+        if near_least || near_greatest {
+            let Some(t) = theta(k) else {
+                return scan();
+            };
+            if near_least {
+                lo = lo.min(t);
+            }
+            if near_greatest {
+                hi = hi.max(t);
+            }
+        }
+    }
+    (lo, hi)
 }
 
 /// [`Renderer::render_view`] as a `pulp` kernel (a struct with an inlined method, not a

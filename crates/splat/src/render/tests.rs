@@ -163,3 +163,49 @@ pub(super) fn regions() -> impl Strategy<Value = Region> {
         height: 240 - v0 - dv,
     })
 }
+
+proptest! {
+    /// The angles off the axis that culling uses are those of a scan of every valid
+    /// pixel, bit for bit, for random intrinsics (the principal point anywhere, mirrors
+    /// with ξ up to 2, whose fold some pixels pass), whole images and annuli.
+    #[test]
+    fn theta_range_is_the_scan_of_every_pixel(
+        alpha_u in 20.0f64..400.0,
+        aspect in 0.8f64..1.25,
+        skew in -3.0f64..3.0,
+        xi in 0.0f64..2.0,
+        u0 in -20.0f64..60.0,
+        v0 in -20.0f64..50.0,
+        annulus in prop::option::of((0.0f64..10.0, 12.0f64..40.0)),
+    ) {
+        let region = match annulus {
+            None => ValidRegion::Full,
+            Some((inner, outer)) => ValidRegion::Annulus(ucm::Annulus {
+                center_px: [u0, v0],
+                inner_radius_px: inner,
+                outer_radius_px: outer,
+            }),
+        };
+        let Ok(camera) = Camera::new(
+            Intrinsics { alpha_u, alpha_v: alpha_u * aspect, u0, v0, xi, skew },
+            None,
+            48,
+            36,
+            region,
+        ) else {
+            return Ok(());
+        };
+        let w = camera.width() as usize;
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (k, _) in camera.valid_pixels().iter().enumerate().filter(|(_, v)| **v) {
+            if let Ok(ray) = camera.unproject([(k % w) as f64, (k / w) as f64]) {
+                let t = ray[2].clamp(-1.0, 1.0).acos();
+                lo = lo.min(t);
+                hi = hi.max(t);
+            }
+        }
+        let (got_lo, got_hi) = theta_range(&camera);
+        prop_assert_eq!(got_lo.to_bits(), lo.to_bits());
+        prop_assert_eq!(got_hi.to_bits(), hi.to_bits());
+    }
+}

@@ -18,22 +18,29 @@ pub(crate) struct Level {
     /// The pose `frame` was last rendered at and what that rendering did, for
     /// [`render_once`].
     pub(crate) rendered_at: Option<(Isometry3, RenderStats)>,
+    /// The rendering's PGM; a brightness stage (PoVS) computes the brightness with the
+    /// buffers of its brightness stage ([`Pgm::brightness_mut`]).
     pub(crate) pgm: Pgm,
-    pub(crate) brightness: Brightness,
-    /// The vignetting model's basis, the corrected rendering, and the transform of its
-    /// derivative pictures (used only with `VvsConfig::vignetting`).
-    pub(crate) vignetting: RadialVignetting,
-    pub(crate) corrected: Frame,
-    pub(crate) derivative: Image,
-    pub(crate) derivative_pgm: Pgm,
-    /// With [`crate::Support::Common`]: the desired picture's features on the pixels compared
-    /// (taken again at every iteration), and those pixels.
+    /// The vignetting model's buffers, with [`VvsConfig::vignetting`] only.
+    pub(crate) vignetting: Option<Box<VignettingBuffers>>,
+    /// With [`crate::Support::Common`]: the desired picture's features on the pixels
+    /// compared (taken again at every iteration; its brightness stage for a brightness
+    /// stage), and those pixels.
     pub(crate) desired_pgm: Pgm,
-    pub(crate) desired_brightness: Brightness,
     pub(crate) support: Vec<bool>,
     /// The desired picture as compared, at every pixel it observes, and those pixels.
     pub(crate) against: Vec<f32>,
     pub(crate) against_observed: Vec<bool>,
+}
+
+/// The vignetting model's basis, the corrected rendering, and the transform of its
+/// derivative pictures.
+#[derive(Debug)]
+pub(crate) struct VignettingBuffers {
+    pub(crate) model: RadialVignetting,
+    pub(crate) corrected: Frame,
+    pub(crate) derivative: Image,
+    pub(crate) derivative_pgm: Pgm,
 }
 
 /// The PGM's options of `config`, its brightness normalised or not.
@@ -56,24 +63,33 @@ impl Level {
             ..RenderOptions::default()
         };
         // The camera's pixel grid set up once, shared by every feature of the level.
-        let brightness = Brightness::new(&camera).with_normalization(config.normalize);
-        let pgm = |normalize| {
-            Pgm::from_brightness(brightness.sharing_tables(), pgm_options(config, normalize))
+        let pgm = Pgm::from_brightness(
+            Brightness::new(&camera),
+            pgm_options(config, config.normalize),
+        )?;
+        let sharing = |normalize| {
+            Pgm::from_brightness(
+                pgm.brightness().sharing_tables(),
+                pgm_options(config, normalize),
+            )
+        };
+        let vignetting = if config.vignetting {
+            Some(Box::new(VignettingBuffers {
+                model: RadialVignetting::new(&camera),
+                corrected: Frame::for_camera(&camera),
+                derivative: Image::new(camera.width(), camera.height()),
+                derivative_pgm: sharing(false)?,
+            }))
+        } else {
+            None
         };
         Ok(Self {
             renderer: Renderer::new(camera.clone(), options)?,
             frame: Frame::for_camera(&camera),
             rendered_at: None,
-            pgm: pgm(config.normalize)?,
-            vignetting: RadialVignetting::new(&camera),
-            corrected: Frame::for_camera(&camera),
-            derivative: Image::new(camera.width(), camera.height()),
-            derivative_pgm: pgm(false)?,
-            desired_pgm: pgm(config.normalize)?,
-            desired_brightness: brightness
-                .sharing_tables()
-                .with_normalization(config.normalize),
-            brightness,
+            desired_pgm: sharing(config.normalize)?,
+            pgm,
+            vignetting,
             support: vec![false; camera.pixel_count()],
             against: vec![0.0; camera.pixel_count()],
             against_observed: vec![false; camera.pixel_count()],

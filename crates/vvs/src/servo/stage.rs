@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use brightness::{Against, Brightness, normal_equations, normal_equations_with_column};
+use brightness::{Against, normal_equations, normal_equations_with_column};
 use frame::{AnyImage, Frame, PixelStatus, Restricted};
 use glam::DVec3;
 use pgm::Pgm;
@@ -168,27 +168,21 @@ impl Servo<'_> {
             frame,
             rendered_at,
             pgm,
-            brightness,
             vignetting,
-            corrected,
-            derivative,
-            derivative_pgm,
             desired_pgm,
-            desired_brightness,
             support,
             against,
             against_observed,
         } = &mut self.levels[level];
-        let vignetting_on = self.config.vignetting;
         let common = self.config.support == Support::Common;
         // The desired feature, fixed for the stage (on the common support: taken again
         // at every iteration).
         let (mut lambda, optimise_lambda) = match stage {
             Stage::Brightness => {
                 if !common {
-                    brightness.compute(desired)?;
+                    pgm.brightness_mut().compute(desired)?;
                     self.desired.clear();
-                    self.desired.extend_from_slice(brightness.values());
+                    self.desired.extend_from_slice(pgm.brightness().values());
                 }
                 (0.0, false)
             }
@@ -220,11 +214,12 @@ impl Servo<'_> {
                     break 'stage (StopReason::Diverged(Divergence::NoValidPixels), iteration);
                 }
                 // The rendering as the camera would see it (with the vignetting model).
-                let input: &Frame = if vignetting_on {
-                    vignetting.apply(*coefficients, frame, corrected);
-                    corrected
-                } else {
-                    frame
+                let input: &Frame = match vignetting {
+                    Some(v) => {
+                        v.model.apply(*coefficients, frame, &mut v.corrected);
+                        &v.corrected
+                    }
+                    None => frame,
                 };
                 // Feature, residuals, rows.
                 if common {
@@ -241,9 +236,10 @@ impl Servo<'_> {
                     self.desired.clear();
                     let normalized = match stage {
                         Stage::Brightness => {
-                            desired_brightness.compute(&desired_view)?;
-                            self.desired.extend_from_slice(desired_brightness.values());
-                            &*desired_brightness
+                            desired_pgm.brightness_mut().compute(&desired_view)?;
+                            self.desired
+                                .extend_from_slice(desired_pgm.brightness().values());
+                            desired_pgm.brightness()
                         }
                         Stage::Pgm { lambda_star, .. } => {
                             self.desired.extend_from_slice(
@@ -278,36 +274,36 @@ impl Servo<'_> {
                         observed: against_observed,
                     };
                     match stage {
-                        Stage::Brightness => brightness.compute_against(&view, against)?,
+                        Stage::Brightness => {
+                            pgm.brightness_mut().compute_against(&view, against)?
+                        }
                         Stage::Pgm { .. } => {
                             pgm.compute_against(&view, against, lambda, self.config.jacobian)?
                         }
                     }
                 } else {
-                    compute_feature(stage, brightness, pgm, input, lambda, self.config.jacobian)?;
+                    compute_feature(stage, pgm, input, lambda, self.config.jacobian)?;
                 }
                 let (values, pixel_weights): (&[f32], Option<&[f32]>) = match stage {
-                    Stage::Brightness => (brightness.values(), None),
+                    Stage::Brightness => (pgm.brightness().values(), None),
                     Stage::Pgm { .. } => (pgm.values(), Some(pgm.weights())),
                 };
-                if vignetting_on {
-                    // The columns of the coefficients: the feature of each derivative picture.
-                    let feature = match stage {
-                        Stage::Brightness => &*brightness,
-                        Stage::Pgm { .. } => pgm.brightness(),
-                    };
+                if let Some(v) = vignetting {
+                    // The columns of the coefficients: the feature of each derivative picture
+                    // (the brightness or the PGM's brightness stage).
+                    let feature = pgm.brightness();
                     let normalization = self
                         .config
                         .normalize
                         .then(|| (feature.normalization_scale(), feature.image()));
                     for (k, column) in self.columns.iter_mut().enumerate() {
-                        vignetting.derivative(
+                        v.model.derivative(
                             k,
                             frame,
                             feature.samples(),
                             feature.observed(),
                             normalization,
-                            derivative,
+                            &mut v.derivative,
                         );
                         column.clear();
                         match stage {
@@ -315,10 +311,11 @@ impl Servo<'_> {
                                 feature
                                     .samples()
                                     .iter()
-                                    .map(|&s| derivative.intensity[s as usize]),
+                                    .map(|&s| v.derivative.intensity[s as usize]),
                             ),
-                            Stage::Pgm { .. } => column
-                                .extend_from_slice(derivative_pgm.transform(derivative, lambda)?),
+                            Stage::Pgm { .. } => column.extend_from_slice(
+                                v.derivative_pgm.transform(&v.derivative, lambda)?,
+                            ),
                         }
                     }
                 }
@@ -366,9 +363,9 @@ impl Servo<'_> {
                 let eta = self.config.levenberg_marquardt;
                 let mut coefficient_update = [0.0; 2];
                 let solution: Option<([f64; 6], f64)> = match stage {
-                    _ if vignetting_on => {
+                    _ if vignetting.is_some() => {
                         let (rows, j_lambda): (&[[f32; 6]], Option<&[f32]>) = match stage {
-                            Stage::Brightness => (brightness.interaction(), None),
+                            Stage::Brightness => (pgm.brightness().interaction(), None),
                             Stage::Pgm { .. } => {
                                 (pgm.interaction(), optimise_lambda.then(|| pgm.j_lambda()))
                             }
@@ -410,7 +407,7 @@ impl Servo<'_> {
                     }
                     _ => {
                         let rows = match stage {
-                            Stage::Brightness => brightness.interaction(),
+                            Stage::Brightness => pgm.brightness().interaction(),
                             Stage::Pgm { .. } => pgm.interaction(),
                         };
                         let (jtj, jte) =
@@ -442,7 +439,7 @@ impl Servo<'_> {
                     break 'stage (StopReason::Diverged(Divergence::NotFinite), iteration + 1);
                 };
                 *pose = *pose * update;
-                if vignetting_on {
+                if vignetting.is_some() {
                     for (c, dc) in coefficients.iter_mut().zip(coefficient_update) {
                         *c = (*c - gain * dc).clamp(-MAX_COEFFICIENT, MAX_COEFFICIENT);
                     }
@@ -484,14 +481,13 @@ impl Servo<'_> {
 /// The feature of `picture` for `stage`: the brightness, or the PGM at `lambda`.
 fn compute_feature(
     stage: Stage,
-    brightness: &mut Brightness,
     pgm: &mut Pgm,
     picture: &impl AnyImage,
     lambda: f32,
     jacobian: pgm::PgmJacobian,
 ) -> Result<(), VvsError> {
     match stage {
-        Stage::Brightness => brightness.compute(picture)?,
+        Stage::Brightness => pgm.brightness_mut().compute(picture)?,
         Stage::Pgm { .. } => pgm.compute(picture, lambda, jacobian)?,
     }
     Ok(())
