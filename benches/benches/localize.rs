@@ -8,7 +8,9 @@
 //! the picture (rendered at the truth, then degraded by the default acquisition) in
 //! memory, the cloud loaded. Each result is checked against the truth
 //! before it is timed, so that a faster but wrong configuration cannot pass. Set
-//! `PGM_NO_AVX512=1` to measure what a processor without AVX-512 runs (`isa`).
+//! `PGM_NO_AVX512=1` to measure what a processor without AVX-512 runs (`isa`). Each
+//! group also times its prepared or searching case on two threads (`parallel = true`
+//! in a pool of two: the scaling the issue asks to report; the same bits).
 
 use benches::fixture_camera;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
@@ -24,6 +26,15 @@ fn one_thread() -> VvsConfig {
         parallel: false,
         ..Localizer::default().config
     }
+}
+
+/// A pool of two threads, for the scaling the issue asks to report beside each goal
+/// (the localiser's settings with `parallel = true`: the renderer's passes on both).
+fn two_threads() -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of two threads")
 }
 
 /// The picture a camera at `truth` takes of the city (rendered, then acquired).
@@ -72,6 +83,18 @@ fn goal_localization(c: &mut Criterion) {
     group.bench_function("prepared_localizer/from_0.5m_5deg", |b| {
         b.iter(|| prepared.localize(&picture, start).unwrap())
     });
+    let pool = two_threads();
+    let parallel = Localizer {
+        config: VvsConfig {
+            parallel: true,
+            ..localizer.config.clone()
+        },
+        ..localizer.clone()
+    };
+    let mut prepared = parallel.prepare(&city.cloud, &camera).unwrap();
+    group.bench_function("prepared_localizer_2_threads/from_0.5m_5deg", |b| {
+        b.iter(|| pool.install(|| prepared.localize(&picture, start).unwrap()))
+    });
     group.finish();
 
     // Inside the paper's box, from 6 m along the street and 8.6° of heading (the
@@ -96,6 +119,22 @@ fn goal_localization(c: &mut Criterion) {
                 .unwrap()
         })
     });
+    let global = Localizer {
+        config: VvsConfig {
+            parallel: true,
+            ..global.config.clone()
+        },
+        ..global.clone()
+    };
+    group.bench_function("localizer_in_the_paper_box_2_threads/from_6m", |b| {
+        b.iter(|| {
+            pool.install(|| {
+                global
+                    .localize(&city.cloud, &camera, &picture, corner)
+                    .unwrap()
+            })
+        })
+    });
     group.finish();
 }
 
@@ -107,14 +146,15 @@ fn goal_pgmot_frame(c: &mut Criterion) {
     // The frame before: 5 cm and 0.5° back along the street (a car at 1.5 m/s, 30 Hz).
     let previous = truth
         * Isometry3::from_pose_vector([-0.05, 0.0, 0.0, 0.0, 0.0, 0.5f64.to_radians()]).unwrap();
-    let tracker = || {
+    let tracker_on = |parallel| {
         let config = VvsConfig {
-            parallel: false,
+            parallel,
             ..Tracker::default_config()
         };
         let servo = Servo::new(&city.cloud, &camera, config).unwrap();
         Tracker::new(servo, Method::Rule2, previous).unwrap()
     };
+    let tracker = || tracker_on(false);
     let outcome = tracker().align(&picture).unwrap();
     let (t, _) = outcome.world_from_camera.distance_to(&truth);
     println!("PGMoT frame: {t:.4} m, {:?} iterations", outcome.iterations);
@@ -125,6 +165,14 @@ fn goal_pgmot_frame(c: &mut Criterion) {
         b.iter_batched(
             tracker,
             |mut tracker| tracker.align(&picture).unwrap(),
+            BatchSize::PerIteration,
+        )
+    });
+    let pool = two_threads();
+    group.bench_function("tracker_rule2_2_threads/640", |b| {
+        b.iter_batched(
+            || tracker_on(true),
+            |mut tracker| pool.install(|| tracker.align(&picture).unwrap()),
             BatchSize::PerIteration,
         )
     });

@@ -60,10 +60,10 @@
 //! Every kernel gives the same bits.
 //! The points 512 ahead in the draw list are prefetched, a few cache lines per block
 //! (cells are drawn front to back, not in memory order). Single-pixel splats (most of
-//! them) skip the square loops, and the single-threaded passes take minima and add
-//! samples without a branch (whether a point is nearer is unpredictable), on the
-//! buffers as plain integers (the threads of a parallel pass share them as atomics):
-//! there, on AVX-512, a 3 × 3 splat (most of the others) takes its minima, and adds
+//! them) skip the square loops, and the passes take minima and add samples without a
+//! branch (whether a point is nearer is unpredictable), on plain integers (each thread
+//! of a parallel rendering on buffers of its own, merged between batches, `slots`):
+//! on AVX-512, a 3 × 3 splat (most of the others) takes its minima, and adds
 //! its samples, a row of three pixels per instruction. Each point's
 //! splat is bit for bit the one of the scalar reference (tested, both kernels). A
 //! splat whose every pixel already holds a range below its depth band when pass 1
@@ -79,12 +79,9 @@
 //! reference and the baseline block kernel), `projector` (the same on each instruction
 //! set; its kernels in `avx512`, `avx2` and `sse2`, their arithmetic written once in
 //! `lanes`), `pass_one` (depth), `pass_two` (accumulation) and `resolve` (means, sky,
-//! masks, hole filling); `plain` views the atomic buffers as plain integers for one
-//! thread. This file holds the [`Renderer`] and the order of its passes.
+//! masks, hole filling); `slots` runs both passes on several threads, each on buffers
+//! of its own. This file holds the [`Renderer`] and the order of its passes.
 
-use std::sync::atomic::{AtomicU32, AtomicU64};
-
-use rayon::prelude::*;
 use ucm::{Camera, Isometry3};
 
 use frame::{Frame, PixelStatus};
@@ -101,10 +98,10 @@ mod lanes;
 mod options;
 mod pass_one;
 mod pass_two;
-mod plain;
 mod project;
 mod projector;
 mod resolve;
+mod slots;
 mod splat;
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 mod sse2;
@@ -115,8 +112,9 @@ mod view;
 pub use options::{RenderOptions, RenderStats};
 
 use culling::{Candidate, DrawCell, tiles};
-use pass_one::draw_depth;
-use pass_two::{accumulate, widest_pass_two};
+use pass_one::widest_pass_one_plain;
+use pass_two::widest_pass_two;
+use slots::{MAX_RUNS, Slots};
 use splat::Splat;
 use view::{Region, View};
 
@@ -130,10 +128,10 @@ pub struct Renderer {
     options: RenderOptions,
     /// What the buffers below cover (pixels of the [`Region`], row-major).
     region: Region,
-    depth: Vec<AtomicU32>,
+    depth: Vec<u32>,
     /// Per pixel: `(Σ intensity << 24) | count` and `Σ range`, fixed point,
     /// interleaved so that pass 2 touches one cache line per pixel.
-    accum: Vec<[AtomicU64; 2]>,
+    accum: Vec<[u64; 2]>,
     candidates: Vec<Candidate>,
     /// The candidates' draw order: range of the nearest point's bits, index.
     order: Vec<u64>,
@@ -158,6 +156,8 @@ pub struct Renderer {
     cleared: bool,
     theta_min: f32,
     theta_max: f32,
+    /// The buffers of a parallel rendering's other threads.
+    slots: Slots,
 }
 
 const EMPTY: u32 = u32::MAX;
@@ -220,17 +220,18 @@ impl Renderer {
             })
             .collect();
         let status = vec![PixelStatus::Sky; camera.pixel_count()];
+        // A parallel renderer's threads' buffers, for the pool it is made in (grown at
+        // a rendering in a larger one).
+        let mut slots = Slots::default();
+        if options.parallel {
+            slots.prepare(rayon::current_num_threads().clamp(1, MAX_RUNS), &valid_bits);
+        }
         Ok(Self {
             camera,
             options,
             region,
-            depth: valid_bits
-                .iter()
-                .map(|&v| AtomicU32::new(EMPTY & v))
-                .collect(),
-            accum: (0..n)
-                .map(|_| [AtomicU64::new(0), AtomicU64::new(0)])
-                .collect(),
+            depth: valid_bits.iter().map(|&v| EMPTY & v).collect(),
+            accum: vec![[0; 2]; n],
             candidates: Vec::new(),
             order: Vec::new(),
             draw: Vec::new(),
@@ -243,6 +244,7 @@ impl Renderer {
             cleared: true,
             theta_min,
             theta_max,
+            slots,
         })
     }
 
@@ -316,18 +318,23 @@ impl Renderer {
         let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
 
         // The last resolve cleared the buffers, unless it did not run (a panic): then
-        // cleared here, as plain integers (stores the compiler widens, unlike atomic
-        // ones).
+        // cleared here.
         if !std::mem::replace(&mut self.cleared, false) {
-            for (key, &valid) in plain::depths(&mut self.depth)
-                .iter_mut()
-                .zip(&self.valid_bits)
-            {
+            for (key, &valid) in self.depth.iter_mut().zip(&self.valid_bits) {
                 *key = EMPTY & valid;
             }
-            plain::sums(&mut self.accum).fill([0; 2]);
+            self.accum.fill([0; 2]);
         }
-        let parallel = self.options.parallel && rayon::current_num_threads() > 1;
+        // The runs a parallel rendering cuts each pass into (`slots`).
+        let runs = if self.options.parallel {
+            rayon::current_num_threads().clamp(1, MAX_RUNS)
+        } else {
+            1
+        };
+        if runs > 1 {
+            // A masked pixel's cleared key is 0, a valid one's EMPTY: the valid bits.
+            self.slots.prepare(runs, &self.valid_bits);
+        }
         let occlusion = self.options.occlusion_culling && view.undistorted;
         self.splats.resize(candidate_points, Splat::default());
         self.draw.clear();
@@ -359,25 +366,29 @@ impl Renderer {
             }
             let cells = &self.draw[first..];
             let splats = &mut self.splats[splats_kept..splats_kept + batch_points];
-            splats_kept += draw_depth(
-                cloud.points(),
-                cells,
-                &view,
-                &self.camera,
-                &mut self.depth,
-                splats,
-                parallel,
-            );
+            let depth = &mut self.depth[..];
+            splats_kept += if runs > 1 {
+                self.slots.draw_depth(
+                    runs,
+                    cloud.points(),
+                    cells,
+                    &view,
+                    &self.camera,
+                    depth,
+                    splats,
+                )
+            } else {
+                widest_pass_one_plain(cloud.points(), cells, &view, &self.camera, depth, splats)
+            };
             points_drawn += batch_points;
         }
         let splats = &self.splats[..splats_kept];
-        if parallel {
-            splats
-                .par_chunks(16_384)
-                .for_each(|splats| accumulate(splats, &view, &self.depth, &self.accum));
+        let (depth, accum) = (&self.depth[..], &mut self.accum[..]);
+        if runs > 1 {
+            self.slots
+                .accumulate(runs, splats, &view, depth, accum, &self.valid_bits);
         } else {
-            let depth = plain::depths(&mut self.depth);
-            widest_pass_two(splats, &view, depth, plain::sums(&mut self.accum));
+            widest_pass_two(splats, &view, depth, accum);
         }
 
         let mut pixels_hit = self.resolve(frame);

@@ -181,32 +181,42 @@ fn render_city(
     frame
 }
 
-/// Same frame, bit for bit, with 1 and 2 threads.
+/// Same frame and statistics, bit for bit, on 1, 2, 3, 5 and 8 threads (each thread
+/// drawing on buffers of its own, merged), by a renderer that drew on other thread
+/// counts and poses before (its threads' buffers kept, grown and cleared between
+/// renderings), at street poses and a pose between the buildings' walls.
 #[test]
 fn rendering_is_deterministic_across_thread_counts() {
     let camera = fixture("omni-320x240.toml");
-    let pose = camera_looking_down(DVec3::new(-18.0, 1.0, 3.0), 0.2);
-    let frames: Vec<Frame> = [1, 2]
-        .into_iter()
-        .map(|threads| {
-            rayon::ThreadPoolBuilder::new()
+    let poses = [
+        camera_looking_down(DVec3::new(-18.0, 1.0, 3.0), 0.2),
+        camera_looking_down(DVec3::new(5.0, -1.0, 1.6), 1.0),
+        camera_looking_down(DVec3::new(-31.0, 5.5, 1.2), 2.0),
+    ];
+    let cloud = &default_city().cloud;
+    let serial = RenderOptions {
+        parallel: false,
+        ..RenderOptions::default()
+    };
+    let mut reused = Renderer::new(camera.clone(), RenderOptions::default()).unwrap();
+    for pose in &poses {
+        let mut expected = Frame::for_camera(&camera);
+        let expected_stats = Renderer::new(camera.clone(), serial)
+            .unwrap()
+            .render(cloud, &pose.inverse(), &mut expected)
+            .unwrap();
+        assert!(expected.counts().0 > 5_000);
+        for threads in [2, 3, 5, 8, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
-                .unwrap()
-                .install(|| render_city(&camera, &pose, RenderOptions::default()))
-        })
-        .collect();
-    assert!(frames[0].counts().0 > 10_000);
-    assert!(frames[0].bitwise_eq(&frames[1]));
-    let again = render_city(
-        &camera,
-        &pose,
-        RenderOptions {
-            parallel: false,
-            ..RenderOptions::default()
-        },
-    );
-    assert!(frames[0].bitwise_eq(&again));
+                .unwrap();
+            let mut frame = Frame::for_camera(&camera);
+            let stats = pool.install(|| reused.render(cloud, &pose.inverse(), &mut frame).unwrap());
+            assert!(frame.bitwise_eq(&expected), "{threads} threads, {pose:?}");
+            assert_eq!(stats, expected_stats, "{threads} threads, {pose:?}");
+        }
+    }
 }
 
 /// A renderer that drew other poses before (its buffers cleared by each resolve, not

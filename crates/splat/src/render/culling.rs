@@ -113,9 +113,9 @@ impl Renderer {
 
     /// Whether every pixel that a point of `candidate` could cover already holds a
     /// range nearer than the cell by more than the depth band (then the cell can
-    /// change nothing). Conservative: `false` whenever in doubt. Takes the depth
-    /// buffer mutably (no other thread draws meanwhile) so that its rows are read as
-    /// plain integers, several at a time.
+    /// change nothing). Conservative: `false` whenever in doubt. Takes the renderer
+    /// mutably for the tiles' cache; the depth buffer holds every thread's minima
+    /// between batches.
     #[inline(always)]
     pub(super) fn occluded(&mut self, candidate: &Candidate, view: &View) -> bool {
         let Some([u0, u1, v0, v1]) = self.image_rect(candidate, view) else {
@@ -150,8 +150,8 @@ impl Renderer {
         // Masked pixels hold the key 0: they never raise the farthest.
         let mut farthest = 0u32;
         for row in v0..=v1 {
-            let depth = &mut self.depth[row * w + u0..=row * w + u1];
-            farthest = depth.iter_mut().fold(farthest, |f, d| f.max(*d.get_mut()));
+            let depth = &self.depth[row * w + u0..=row * w + u1];
+            farthest = depth.iter().fold(farthest, |f, &d| f.max(d));
             // The farthest range only grows: stop at the first row that decides.
             if !hides(farthest) {
                 return false;
@@ -169,8 +169,8 @@ impl Renderer {
             let (u0, u1) = (tu * TILE, ((tu + 1) * TILE).min(w));
             let mut farthest = 0u32;
             for row in tv * TILE..((tv + 1) * TILE).min(h) {
-                let depth = &mut self.depth[row * w + u0..row * w + u1];
-                farthest = depth.iter_mut().fold(farthest, |f, d| f.max(*d.get_mut()));
+                let depth = &self.depth[row * w + u0..row * w + u1];
+                farthest = depth.iter().fold(farthest, |f, &d| f.max(d));
             }
             self.tile_farthest[index] = farthest;
             self.tile_batch[index] = self.batch;

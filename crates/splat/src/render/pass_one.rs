@@ -1,15 +1,11 @@
 //! Pass 1 (depth): project every point of the cells drawn, take the minimum range
 //! over each splat's pixels, and keep the splats that may add a sample in pass 2.
 
-use std::sync::atomic::{AtomicU32, Ordering};
-
-use rayon::prelude::*;
 use ucm::Camera;
 
 use crate::PackedPoint;
 
 use super::culling::DrawCell;
-use super::plain;
 use super::project::{BLOCK, project_point};
 #[cfg(target_arch = "x86_64")]
 use super::projector::{Avx2, Avx512};
@@ -17,61 +13,18 @@ use super::projector::{Baseline, Project};
 use super::splat::Splat;
 use super::view::View;
 
-/// Pass 1 over a batch of cells, on rayon's threads if `parallel`: chunks of cells of
-/// similar work, each with its own run of splat slots; atomics make the result
-/// independent of the order. Returns the number of slots of `splats` that pass 2 must
-/// read (on one thread, the splats that may add a sample are moved to the front; on
-/// several, the others are marked [`NOT_DRAWN`](super::splat::NOT_DRAWN)).
-pub(super) fn draw_depth(
+/// Pass 1 over a batch of cells on one thread, on plain keys. Returns the number of
+/// slots of `splats` that pass 2 must read (the splats that may add a sample, moved to
+/// the front).
+pub(super) fn widest_pass_one_plain(
     points: &[PackedPoint],
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: &mut [AtomicU32],
+    depth: &mut [u32],
     splats: &mut [Splat],
-    parallel: bool,
 ) -> usize {
-    if !parallel {
-        let depth = plain::depths(depth);
-        return widest_pass_one(points, cells, view, camera, depth, splats);
-    }
-    let depth = &*depth;
-    let total = splats.len();
-    let chunks = chunk_cells(cells, 16_384);
-    let mut slices = Vec::with_capacity(chunks.len());
-    let mut rest = splats;
-    for cells in &chunks {
-        let n: usize = cells.iter().map(|c| c.count as usize).sum();
-        let (head, tail) = rest.split_at_mut(n);
-        slices.push((*cells, head));
-        rest = tail;
-    }
-    slices.par_iter_mut().for_each(|(cells, splats)| {
-        let kept = widest_pass_one(points, cells, view, camera, depth, splats);
-        for s in &mut splats[kept..] {
-            *s = Splat::not_drawn();
-        }
-    });
-    total
-}
-
-/// Split the draw list into runs of about `target` points.
-fn chunk_cells(cells: &[DrawCell], target: usize) -> Vec<&[DrawCell]> {
-    let mut chunks = Vec::new();
-    let mut start = 0;
-    let mut acc = 0usize;
-    for (k, c) in cells.iter().enumerate() {
-        acc += c.count as usize;
-        if acc >= target {
-            chunks.push(&cells[start..=k]);
-            start = k + 1;
-            acc = 0;
-        }
-    }
-    if start < cells.len() {
-        chunks.push(&cells[start..]);
-    }
-    chunks
+    widest_pass_one(points, cells, view, camera, depth, splats)
 }
 
 /// Points projected into a buffer of the first level of cache before their depth
@@ -104,10 +57,9 @@ impl<D: Depths> PassOneArgs<'_, D> {
     }
 }
 
-/// The depth buffer as pass 1 writes it ([`Depths::splat`]): shared by the threads of
-/// a parallel pass (`&[AtomicU32]`, atomic minima), or held by one thread
-/// (`&mut [u32]`, plain keys, several pixels at a time). A trait, so that each pass
-/// is compiled for its buffer.
+/// The depth buffer as pass 1 writes it ([`Depths::splat`]): held by one thread
+/// (`&mut [u32]`, plain keys, several pixels at a time; a parallel rendering gives each
+/// thread its own, `super::slots`).
 trait Depths {
     /// Take the minimum of the splat's range and the depth of each pixel it covers.
     /// Returns whether the splat may still add a sample in pass 2: not if every pixel
@@ -115,20 +67,6 @@ trait Depths {
     /// reject it everywhere; the test is pass 2's own, on a depth at least the final
     /// one).
     fn splat(&mut self, s: &Splat, view: &View, projector: impl Project) -> bool;
-}
-
-impl Depths for &[AtomicU32] {
-    #[inline(always)]
-    fn splat(&mut self, s: &Splat, view: &View, _: impl Project) -> bool {
-        let (key, limit) = (s.0[2], s.limit_m());
-        let mut hidden = true;
-        s.for_each_pixel(view, |k| {
-            let before = self[k].fetch_min(key, Ordering::Relaxed);
-            // An empty pixel's key is a NaN: never below the limit.
-            hidden &= f32::from_bits(before) < limit;
-        });
-        !hidden
-    }
 }
 
 impl Depths for &mut [u32] {

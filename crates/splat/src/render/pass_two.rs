@@ -1,8 +1,6 @@
 //! Pass 2 (accumulation, the anti-aliasing): add each kept splat's intensity and
 //! range to the pixels it covers where it lies within the depth band of the nearest.
 
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
-
 #[cfg(target_arch = "x86_64")]
 use super::projector::{Avx2, Avx512};
 use super::projector::{Baseline, Project};
@@ -20,30 +18,8 @@ fn samples(s: &Splat) -> (u64, u64) {
     (sample, range_sample)
 }
 
-/// Pass 2 over the splats of pass 1, shared by the threads of a parallel pass: add
-/// each sample to the pixels it covers where it lies within the depth band of the
-/// nearest.
-#[inline(always)]
-pub(super) fn accumulate(
-    splats: &[Splat],
-    view: &View,
-    depth: &[AtomicU32],
-    accum: &[[AtomicU64; 2]],
-) {
-    for s in splats.iter().filter(|s| s.drawn()) {
-        let (sample, range_sample) = samples(s);
-        let limit = s.limit_m();
-        s.for_each_pixel(view, |k| {
-            if f32::from_bits(depth[k].load(Ordering::Relaxed)) >= limit {
-                let [slot, range] = &accum[k];
-                slot.fetch_add(sample, Ordering::Relaxed);
-                range.fetch_add(range_sample, Ordering::Relaxed);
-            }
-        });
-    }
-}
-
-/// [`accumulate`] on one thread, on plain keys and sums: 3 × 3 splats whole rows at a
+/// Pass 2 on one thread, on plain keys and sums (a parallel rendering gives each
+/// thread its own sums, `super::slots`): 3 × 3 splats whole rows at a
 /// time where the instruction set allows ([`Project::accumulate_3x3`]), the others
 /// without a branch (whether a sample is within the band is unpredictable).
 #[inline(always)]

@@ -4,7 +4,7 @@
 use frame::{Frame, PixelStatus};
 
 use super::view::Region;
-use super::{COUNT_BITS, COUNT_MASK, EMPTY, INTENSITY_SCALE, RANGE_SCALE, Renderer, plain};
+use super::{COUNT_BITS, COUNT_MASK, EMPTY, INTENSITY_SCALE, RANGE_SCALE, Renderer};
 
 impl Renderer {
     /// Pass 3, the resolve: the frame's intensity, range and status of every pixel from
@@ -23,8 +23,7 @@ impl Renderer {
             width,
             height,
         } = self.region;
-        let depth = plain::depths(&mut self.depth);
-        let accum = plain::sums(&mut self.accum);
+        let (depth, accum) = (&mut self.depth[..], &mut self.accum[..]);
         let mut pixels_hit = 0;
         let mut rows_resolved = 0;
         let rows = frame

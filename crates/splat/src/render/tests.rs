@@ -83,8 +83,8 @@ fn a_rendering_left_unfinished_is_cleared_by_the_next() {
     let poisoned = |cleared: bool| {
         let mut renderer = Renderer::new(camera.clone(), options).unwrap();
         render(&mut renderer);
-        plain::depths(&mut renderer.depth).fill(0);
-        plain::sums(&mut renderer.accum).fill([1, 1]);
+        renderer.depth.fill(0);
+        renderer.accum.fill([1, 1]);
         renderer.cleared = cleared;
         render(&mut renderer)
     };
