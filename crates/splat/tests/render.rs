@@ -181,9 +181,9 @@ fn render_city(
     frame
 }
 
-/// Same frame and statistics, bit for bit, on 1, 2, 3, 5 and 8 threads (each thread
-/// drawing on buffers of its own, merged), by a renderer that drew on other thread
-/// counts and poses before (its threads' buffers kept, grown and cleared between
+/// Same frame and statistics, bit for bit, on one thread (`parallel` off) and in pools
+/// of 2, 3, 5 and 8 threads (each run on buffers of its own, merged), by a renderer
+/// that drew in other pools and at other poses before (its threads' buffers kept, grown and cleared between
 /// renderings), at street poses and a pose between the buildings' walls.
 #[test]
 fn rendering_is_deterministic_across_thread_counts() {

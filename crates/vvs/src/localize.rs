@@ -105,9 +105,10 @@ pub struct Localizer {
     /// it can show). On the synthetic city the paper's settings' convergence domain, in
     /// a quarter of their iterations (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`, what the speed goals are
-    /// stated for); `parallel = true` draws each rendering on every thread of rayon's
-    /// pool (on two cores a prepared localisation in three quarters of the time, a
-    /// global search in nine tenths: `docs/RESULTS.md`, "Speed"), the same bits. With a
+    /// stated for); `parallel = true` spreads each rendering (in up to 8 runs) and the
+    /// PGM's convolutions over rayon's threads (on two cores a prepared localisation in
+    /// about four fifths of the time, a global search in 0.88–0.95 of it:
+    /// `docs/RESULTS.md`, "Speed"), the same bits. With a
     /// prior box, the global search's descents pruned (`global.prune_after_iterations
     /// = 3`, `global.pruned_to = 10`: every screened candidate descends 3 iterations,
     /// the 10 best run on to 10; a search 1.96 → 1.55 s, the same success on the

@@ -24,8 +24,10 @@ pub struct RenderOptions {
     /// Largest splat half-width, pixels: splats are at most `2 r + 1` pixels wide
     /// (bounds the cost of points very close to the camera). Default 8.
     pub max_splat_radius_px: u32,
-    /// Draw with rayon when the pool has more than one thread (each thread on buffers
-    /// of its own, up to 8). The output is the same either way. Default true.
+    /// Draw with rayon when the pool has more than one thread: each pass cut into as
+    /// many runs as the pool has threads (at most 8), each run on buffers of its own
+    /// (about 20 bytes a pixel of the valid pixels' box each, made with the renderer).
+    /// The output is the same either way. Default true.
     pub parallel: bool,
     /// Fill isolated holes: a pixel of the valid region with no sample but at least 6
     /// of its 8 neighbours hit (at the valid region's edge: every valid neighbour, at

@@ -179,6 +179,21 @@ impl Slots {
     }
 }
 
+#[cfg(test)]
+impl Slots {
+    /// Every buffer made nonsense (keys 0, sums 1), as a rendering that stopped
+    /// midway could leave them, and marked `cleared` or not.
+    pub(super) fn poison(&mut self, cleared: bool) {
+        for depth in &mut self.depth {
+            depth.fill(0);
+        }
+        for accum in &mut self.accum {
+            accum.fill([1, 1]);
+        }
+        self.cleared = cleared;
+    }
+}
+
 /// The first cell of each of `runs` runs of about equal points, and the end
 /// (`runs + 1` bounds; runs may be empty).
 fn cut(cells: &[DrawCell], runs: usize) -> [usize; MAX_RUNS + 1] {

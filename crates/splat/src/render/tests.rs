@@ -63,7 +63,8 @@ fn scattered_cloud() -> PointCloud {
 
 /// A rendering that did not reach its resolve (its buffers left with stale keys
 /// and sums, as a panic would leave them) is cleared by the next one, which then
-/// draws a fresh renderer's frame bit for bit; and the test fails if it is not.
+/// draws a fresh renderer's frame bit for bit, on one thread and in a pool of three
+/// (the other runs' buffers); and the test fails if it is not.
 #[test]
 fn a_rendering_left_unfinished_is_cleared_by_the_next() {
     let (camera, options) = test_setup(80.0, 1.0, 0.0, 0.9, 1.25, 8);
@@ -91,6 +92,25 @@ fn a_rendering_left_unfinished_is_cleared_by_the_next() {
     assert!(poisoned(false).bitwise_eq(&fresh));
     // The flag is what clears them: claimed clear, the stale buffers show.
     assert!(!poisoned(true).bitwise_eq(&fresh));
+    // The same for the buffers of a parallel rendering's other runs.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(3)
+        .build()
+        .unwrap();
+    let parallel = RenderOptions {
+        parallel: true,
+        ..options
+    };
+    let poisoned_runs = |cleared: bool| {
+        pool.install(|| {
+            let mut renderer = Renderer::new(camera.clone(), parallel).unwrap();
+            render(&mut renderer);
+            renderer.slots.poison(cleared);
+            render(&mut renderer)
+        })
+    };
+    assert!(poisoned_runs(false).bitwise_eq(&fresh));
+    assert!(!poisoned_runs(true).bitwise_eq(&fresh));
 }
 
 /// The frame drawn into the box of the valid pixels equals, bit for bit, the one

@@ -30,7 +30,8 @@ const UNIFORM_INTENSITY_RANGE: f32 = 1.0 / (255.0 * 16.0);
 pub const MAX_SERVO_PIXELS: u64 = 1 << 22;
 
 /// Set-up memory of [`Servo`] per camera pixel, bytes (measured: a 4096 × 4096 camera
-/// took 3.7 GB).
+/// took 3.7 GB, one thread; with `VvsConfig::parallel` each renderer also holds about 20
+/// bytes a pixel for each more thread of the pool, up to 7).
 pub const SERVO_BYTES_PER_PIXEL: u64 = 220;
 
 /// The optimiser for one cloud and camera, owning every buffer (no allocation per
