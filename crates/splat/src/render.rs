@@ -112,7 +112,7 @@ mod view;
 pub use options::{RenderOptions, RenderStats};
 
 use culling::{Candidate, DrawCell, tiles};
-use pass_one::widest_pass_one_plain;
+use pass_one::widest_pass_one;
 use pass_two::widest_pass_two;
 use slots::{MAX_RUNS, Slots};
 use splat::Splat;
@@ -378,7 +378,7 @@ impl Renderer {
                     splats,
                 )
             } else {
-                widest_pass_one_plain(cloud.points(), cells, &view, &self.camera, depth, splats)
+                widest_pass_one(cloud.points(), cells, &view, &self.camera, depth, splats)
             };
             points_drawn += batch_points;
         }

@@ -222,7 +222,7 @@ fn four(depth: &[u32], k: usize) -> [u32; 4] {
 /// caller checked that four pixels from its last row's first are in `depth`): each
 /// row's three keys take their minimum with `key` in one instruction (the fourth is
 /// written back as it was). Returns whether a pixel held a range not below `limit`
-/// before (a NaN, an empty pixel, counts): `pass_one::Depths::splat`'s result.
+/// before (a NaN, an empty pixel, counts): `pass_one::splat_depth`'s result.
 #[inline(always)]
 pub(super) fn depth_3x3(
     simd: V4,

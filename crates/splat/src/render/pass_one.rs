@@ -13,20 +13,6 @@ use super::projector::{Baseline, Project};
 use super::splat::Splat;
 use super::view::View;
 
-/// Pass 1 over a batch of cells on one thread, on plain keys. Returns the number of
-/// slots of `splats` that pass 2 must read (the splats that may add a sample, moved to
-/// the front).
-pub(super) fn widest_pass_one_plain(
-    points: &[PackedPoint],
-    cells: &[DrawCell],
-    view: &View,
-    camera: &Camera,
-    depth: &mut [u32],
-    splats: &mut [Splat],
-) -> usize {
-    widest_pass_one(points, cells, view, camera, depth, splats)
-}
-
 /// Points projected into a buffer of the first level of cache before their depth
 /// pass (a multiple of [`BLOCK`]).
 const STAGE: usize = 256;
@@ -38,16 +24,16 @@ const WARM_AHEAD: usize = 512;
 const POINTS_PER_LINE: usize = 64 / size_of::<PackedPoint>();
 
 /// The arguments of [`project_and_depth`] but the projector.
-struct PassOneArgs<'a, D> {
+struct PassOneArgs<'a> {
     points: &'a [PackedPoint],
     cells: &'a [DrawCell],
     view: &'a View,
     camera: &'a Camera,
-    depth: D,
+    depth: &'a mut [u32],
     splats: &'a mut [Splat],
 }
 
-impl<D: Depths> PassOneArgs<'_, D> {
+impl PassOneArgs<'_> {
     #[inline(always)]
     fn run(self, projector: impl Project) -> usize {
         let a = self;
@@ -57,49 +43,41 @@ impl<D: Depths> PassOneArgs<'_, D> {
     }
 }
 
-/// The depth buffer as pass 1 writes it ([`Depths::splat`]): held by one thread
-/// (`&mut [u32]`, plain keys, several pixels at a time; a parallel rendering gives each
-/// thread its own, `super::slots`).
-trait Depths {
-    /// Take the minimum of the splat's range and the depth of each pixel it covers.
-    /// Returns whether the splat may still add a sample in pass 2: not if every pixel
-    /// already held a range below its band (depths only decrease, so pass 2 would
-    /// reject it everywhere; the test is pass 2's own, on a depth at least the final
-    /// one).
-    fn splat(&mut self, s: &Splat, view: &View, projector: impl Project) -> bool;
-}
-
-impl Depths for &mut [u32] {
-    #[inline(always)]
-    fn splat(&mut self, s: &Splat, view: &View, projector: impl Project) -> bool {
-        let (key, limit) = (s.0[2], s.limit_m());
-        // Most splats: a single pixel, decided first (before the 3 × 3 test).
-        if s.width() == 1 {
-            let k = s.single_pixel();
-            let before = self[k];
-            self[k] = key.min(before);
-            return !(f32::from_bits(before) < limit);
-        }
-        if let Some(first) = s.whole_3x3(view, self.len()) {
-            return projector.depth_3x3(self, first, view.width as usize, key, limit);
-        }
-        let mut hidden = true;
-        s.for_each_pixel(view, |k| {
-            // Branch-free: whether a point is nearer is unpredictable.
-            let before = self[k];
-            self[k] = key.min(before);
-            hidden &= f32::from_bits(before) < limit;
-        });
-        !hidden
+/// Take the minimum of the splat's range and the depth key of each pixel it covers
+/// (plain keys, several pixels at a time; a parallel rendering gives each run its own,
+/// `super::slots`). Returns whether the splat may still add a sample in pass 2: not if
+/// every pixel already held a range below its band (depths only decrease, so pass 2
+/// would reject it everywhere; the test is pass 2's own, on a depth at least the final
+/// one).
+#[inline(always)]
+fn splat_depth(depth: &mut [u32], s: &Splat, view: &View, projector: impl Project) -> bool {
+    let (key, limit) = (s.0[2], s.limit_m());
+    // Most splats: a single pixel, decided first (before the 3 × 3 test).
+    if s.width() == 1 {
+        let k = s.single_pixel();
+        let before = depth[k];
+        depth[k] = key.min(before);
+        return !(f32::from_bits(before) < limit);
     }
+    if let Some(first) = s.whole_3x3(view, depth.len()) {
+        return projector.depth_3x3(depth, first, view.width as usize, key, limit);
+    }
+    let mut hidden = true;
+    s.for_each_pixel(view, |k| {
+        // Branch-free: whether a point is nearer is unpredictable.
+        let before = depth[k];
+        depth[k] = key.min(before);
+        hidden &= f32::from_bits(before) < limit;
+    });
+    !hidden
 }
 
 /// [`project_and_depth`] with a projector, to run compiled for its instruction set
 /// (a struct, not a closure: pulp's `with_simd` is compiled for the instruction set,
 /// and only an `#[inline(always)]` method is sure to be inlined into it).
-struct PassOne<'a, D, P>(PassOneArgs<'a, D>, P);
+struct PassOne<'a, P>(PassOneArgs<'a>, P);
 
-impl<D: Depths, P: Project> pulp::WithSimd for PassOne<'_, D, P> {
+impl<P: Project> pulp::WithSimd for PassOne<'_, P> {
     type Output = usize;
 
     #[inline(always)]
@@ -108,14 +86,16 @@ impl<D: Depths, P: Project> pulp::WithSimd for PassOne<'_, D, P> {
     }
 }
 
-/// [`project_and_depth`] on the widest instruction set found at run time (looked up
-/// once per call, a batch of cells): AVX-512, else AVX2, else the baseline.
-fn widest_pass_one(
+/// Pass 1 over a batch of cells on one thread ([`project_and_depth`]) on the widest
+/// instruction set found at run time (looked up once per call): AVX-512, else AVX2,
+/// else the baseline. Returns the number of slots of `splats` that pass 2 must read
+/// (the splats that may add a sample, moved to the front).
+pub(super) fn widest_pass_one(
     points: &[PackedPoint],
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    depth: impl Depths,
+    depth: &mut [u32],
     splats: &mut [Splat],
 ) -> usize {
     let args = PassOneArgs {
@@ -148,7 +128,7 @@ fn project_and_depth(
     cells: &[DrawCell],
     view: &View,
     camera: &Camera,
-    mut depth: impl Depths,
+    depth: &mut [u32],
     splats: &mut [Splat],
     projector: impl Project,
 ) -> usize {
@@ -192,7 +172,7 @@ fn project_and_depth(
             // Keep the splats that may add a sample (`kept` never passes the number of
             // points read, so its slot exists).
             for s in out.iter().filter(|s| s.drawn()) {
-                let visible = depth.splat(s, view, projector);
+                let visible = splat_depth(depth, s, view, projector);
                 splats[kept] = *s;
                 kept += usize::from(visible);
             }

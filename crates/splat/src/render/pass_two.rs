@@ -23,7 +23,7 @@ fn samples(s: &Splat) -> (u64, u64) {
 /// time where the instruction set allows ([`Project::accumulate_3x3`]), the others
 /// without a branch (whether a sample is within the band is unpredictable).
 #[inline(always)]
-fn accumulate_own(
+fn accumulate(
     splats: &[Splat],
     view: &View,
     depth: &[u32],
@@ -53,7 +53,7 @@ fn accumulate_own(
     }
 }
 
-/// The arguments of [`accumulate_own`] with a projector (its instruction set), to run
+/// The arguments of [`accumulate`] with a projector (its instruction set), to run
 /// compiled for it.
 struct PassTwo<'a, P> {
     splats: &'a [Splat],
@@ -68,7 +68,7 @@ impl<P: Project> pulp::WithSimd for PassTwo<'_, P> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        accumulate_own(
+        accumulate(
             self.splats,
             self.view,
             self.depth,
@@ -78,7 +78,7 @@ impl<P: Project> pulp::WithSimd for PassTwo<'_, P> {
     }
 }
 
-/// [`accumulate_own`] on the widest instruction set found at run time.
+/// [`accumulate`] on the widest instruction set found at run time.
 pub(super) fn widest_pass_two(
     splats: &[Splat],
     view: &View,
@@ -114,5 +114,5 @@ pub(super) fn widest_pass_two(
             );
         }
     }
-    accumulate_own(splats, view, depth, accum, Baseline);
+    accumulate(splats, view, depth, accum, Baseline);
 }

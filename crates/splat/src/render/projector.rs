@@ -29,7 +29,7 @@ pub(super) trait Project: Copy {
     /// ones), as many as `out`.
     fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]);
 
-    /// Pass 1 of a 3 × 3 splat on plain keys (`pass_one::Depths::splat`); the plain loop
+    /// Pass 1 of a 3 × 3 splat on plain keys (`pass_one::splat_depth`); the plain loop
     /// unless the instruction set does it whole rows at a time.
     #[inline(always)]
     fn depth_3x3(
@@ -50,7 +50,7 @@ pub(super) trait Project: Copy {
         !hidden
     }
 
-    /// Pass 2 of a 3 × 3 splat on plain sums (`pass_two::accumulate_own`); the plain loop
+    /// Pass 2 of a 3 × 3 splat on plain sums (`pass_two::accumulate`); the plain loop
     /// unless the instruction set does it whole rows at a time.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]

@@ -15,7 +15,7 @@ use ucm::Camera;
 use crate::PackedPoint;
 
 use super::culling::DrawCell;
-use super::pass_one::widest_pass_one_plain;
+use super::pass_one::widest_pass_one;
 use super::pass_two::widest_pass_two;
 use super::splat::Splat;
 use super::view::View;
@@ -90,14 +90,14 @@ impl Slots {
         rayon::join(
             || {
                 let (run, splats, kept) = &mut first[0];
-                *kept = widest_pass_one_plain(points, run, view, camera, depth, splats);
+                *kept = widest_pass_one(points, run, view, camera, depth, splats);
             },
             || {
                 others
                     .par_iter_mut()
                     .zip(&mut self.depth[..runs - 1])
                     .for_each(|((run, splats, kept), depth)| {
-                        *kept = widest_pass_one_plain(points, run, view, camera, depth, splats);
+                        *kept = widest_pass_one(points, run, view, camera, depth, splats);
                     });
             },
         );
