@@ -164,7 +164,7 @@ impl Localizer {
     /// (`world_from_camera`). Divergence is an outcome, not an error; but a camera that
     /// sees too little of the cloud at `initial` to take one step (without a prior box)
     /// is [`VvsError::CloudNotInView`].
-    pub fn localize<D: AnyImage + Clone>(
+    pub fn localize<D: AnyImage + Clone + Sync>(
         &self,
         cloud: &PointCloud,
         camera: &Camera,
@@ -176,7 +176,7 @@ impl Localizer {
 
     /// [`Localizer::localize`], calling `progress` as a global search goes on (a local
     /// localisation does not call it).
-    pub fn localize_with_progress<D: AnyImage + Clone>(
+    pub fn localize_with_progress<D: AnyImage + Clone + Sync>(
         &self,
         cloud: &PointCloud,
         camera: &Camera,
@@ -256,7 +256,7 @@ pub struct PreparedLocalizer<'a> {
 impl PreparedLocalizer<'_> {
     /// Localise `picture` from `initial` (`world_from_camera`), as
     /// [`Localizer::localize`] does.
-    pub fn localize<D: AnyImage + Clone>(
+    pub fn localize<D: AnyImage + Clone + Sync>(
         &mut self,
         picture: &D,
         initial: Isometry3,
@@ -265,7 +265,7 @@ impl PreparedLocalizer<'_> {
     }
 
     /// [`PreparedLocalizer::localize`], calling `progress` as a global search goes on.
-    pub fn localize_with_progress<D: AnyImage + Clone>(
+    pub fn localize_with_progress<D: AnyImage + Clone + Sync>(
         &mut self,
         picture: &D,
         initial: Isometry3,

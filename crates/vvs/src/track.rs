@@ -278,7 +278,7 @@ impl<'a> Tracker<'a> {
     /// alignment diverged (then the track is lost). With a [`Recovery`], a failed
     /// alignment is followed by a search, and the track is lost if that fails too.
     /// [`VvsError::TrackLost`] once lost.
-    pub fn align<D: AnyImage + Clone>(&mut self, picture: &D) -> Result<Outcome, VvsError> {
+    pub fn align<D: AnyImage + Clone + Sync>(&mut self, picture: &D) -> Result<Outcome, VvsError> {
         if self.lost {
             return Err(VvsError::TrackLost);
         }
@@ -319,7 +319,7 @@ impl<'a> Tracker<'a> {
     /// one to use). After each aligned frame `on_frame` may stop the track
     /// (`ControlFlow::Break`, e.g. when a ground truth says it is lost); a diverged
     /// alignment stops it too. Both count as lost.
-    pub fn track<'p, D: AnyImage + Clone + 'p>(
+    pub fn track<'p, D: AnyImage + Clone + Sync + 'p>(
         &mut self,
         frames: impl IntoIterator<Item = Option<&'p D>>,
         frame_step: usize,

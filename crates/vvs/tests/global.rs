@@ -622,3 +622,78 @@ fn global_converges_from_large_tilts_with_tilt_search() {
     );
     assert_eq!(outcome.search.unwrap().candidates % 25, 0);
 }
+
+/// A parallel search spreads its nodes, descents and refinements over the pool, each
+/// whole on a servo of its own: the same bits as on one thread, in pools of 2 and 3
+/// threads (a servo reused for a second search included), its progress reported too.
+#[test]
+fn a_search_gives_the_same_bits_on_any_number_of_threads() {
+    let prior = PriorBox {
+        translation_m: [2.0, 1.0, 0.5],
+        rotation_deg: [2.0, 2.0, 6.0],
+    };
+    let mut config = VvsConfig {
+        keep_history: true,
+        ..VvsConfig::default()
+    };
+    config.global.prune_after_iterations = 3;
+    config.global.pruned_to = 6;
+    config.global.refined = 3;
+    config.global.refine_within = f64::INFINITY;
+    config.global.merge_distance_m = 0.0;
+    let starts = [
+        offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]),
+        offset([-0.7, 0.3, -0.2, 0.0, 0.02, -0.08]),
+    ];
+    let strip = |o: &vvs::Outcome| {
+        let search = o.search.clone().expect("a search report");
+        (
+            o.world_from_camera,
+            o.cost.to_bits(),
+            o.iterations,
+            o.history
+                .iter()
+                .map(|r| (r.pose, r.cost.to_bits()))
+                .collect::<Vec<_>>(),
+            search.descent_iterations,
+            search.continued,
+            search.chosen_rank,
+            search
+                .refined_costs
+                .iter()
+                .map(|c| c.to_bits())
+                .collect::<Vec<_>>(),
+        )
+    };
+    let servo = |config| Servo::new(&city().cloud, &fixture(), config).unwrap();
+    let mut alone = servo(VvsConfig {
+        parallel: false,
+        ..config.clone()
+    });
+    let desired = alone.render(&desired_pose()).unwrap();
+    let expected: Vec<_> = starts
+        .iter()
+        .map(|&start| strip(&alone.localize_in_box(&desired, start, &prior).unwrap()))
+        .collect();
+    // More than one refinement, so that they too ran on several threads.
+    assert!(expected.iter().any(|e| e.7.len() > 1), "{expected:?}");
+    for threads in [2, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let mut servo = servo(config.clone());
+        for (start, expected) in starts.iter().zip(&expected) {
+            let mut events = 0;
+            let outcome = pool
+                .install(|| {
+                    servo.localize_in_box_with_progress(&desired, *start, &prior, &mut |_| {
+                        events += 1
+                    })
+                })
+                .unwrap();
+            assert_eq!(&strip(&outcome), expected, "{threads} threads");
+            assert!(events >= 3, "{events} progress reports");
+        }
+    }
+}

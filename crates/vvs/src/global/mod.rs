@@ -73,6 +73,8 @@
 
 mod prior;
 mod search;
+
+pub(crate) use search::SearchWorker;
 mod turn;
 
 use serde::{Deserialize, Serialize};

@@ -1,8 +1,16 @@
 //! The global search of [`crate::global`], phase by phase: the orientations' desired
 //! PGMs, the screening of every node, the low-resolution descents, the full-resolution
-//! refinements. Its buffers are its own ([`Orientations`]), built for each search.
+//! refinements. Its buffers are its own ([`Orientations`], [`Scores`]), built for each
+//! search. With [`crate::VvsConfig::parallel`] the nodes, the descents and the
+//! refinements are spread over the pool's threads, each on a servo of its own
+//! ([`SearchWorker`]): every item is computed whole by one of them, the results are
+//! taken in the items' order, so a search gives the same bits on any number of threads.
 
+use std::ops::Range;
+use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
+
+use rayon::prelude::*;
 
 use frame::{AnyImage, Image, PixelStatus, Restricted};
 use glam::DVec3;
@@ -14,7 +22,19 @@ use super::{
     SearchReport, turned, turned_about_optical_axis,
 };
 use crate::servo::{Level, Planned, Stage, StageResult, outside, render_once};
-use crate::{Outcome, Servo, StopReason, Support, VvsError};
+use crate::{Outcome, Servo, StopReason, Support, VvsConfig, VvsError};
+
+/// The most threads a parallel search spreads over (each holds a servo: about
+/// [`crate::SERVO_BYTES_PER_PIXEL`] bytes a pixel of the camera)…
+const MAX_SEARCH_THREADS: usize = 8;
+
+/// … and the most memory their servos may take together, bytes (fewer threads for a
+/// large camera: one for 2048 × 2048 pixels, so its search runs on one).
+const SEARCH_WORKERS_BYTES: u64 = 1 << 30;
+
+/// Items (nodes, descents, refinements) run per thread between two progress reports
+/// of a parallel search.
+const ITEMS_PER_REPORT: usize = 4;
 
 /// A candidate: its score, its node and its orientation (indices).
 type Candidate = (f64, usize, usize);
@@ -52,16 +72,37 @@ struct Orientations {
     /// With [`Support::Common`]: the desired picture turned back by each orientation
     /// (its PGM is taken on each node's common support).
     pictures: Vec<Image>,
-    /// Per orientation, the screening's costs at the last node scored: on the common
-    /// support the fraction of the picture the PGMs' correlation leaves unexplained,
-    /// else their mean squared difference.
+}
+
+/// The screening's scores at one pose, per orientation, and their buffer.
+#[derive(Debug, Default)]
+pub(crate) struct Scores {
+    /// On the common support the fraction of the picture the PGMs' correlation leaves
+    /// unexplained, else their mean squared difference.
     costs: Vec<f64>,
-    /// With [`Support::Common`]: per orientation, the second screening score (the
-    /// fraction of the picture the PGMs' coefficient of determination leaves
-    /// unexplained).
+    /// With [`Support::Common`]: the second score (the fraction of the picture the
+    /// PGMs' coefficient of determination leaves unexplained).
     squared: Vec<f64>,
     /// A copy of the rendering's PGM while the desired one is taken.
     scratch: Vec<f32>,
+}
+
+impl Scores {
+    fn new(orientations: usize) -> Self {
+        Self {
+            costs: vec![f64::INFINITY; orientations],
+            squared: vec![f64::INFINITY; orientations],
+            scratch: Vec::new(),
+        }
+    }
+}
+
+/// A thread of a parallel search: a servo of the same cloud, camera and settings (on
+/// one thread), and its scores.
+#[derive(Debug)]
+pub(crate) struct SearchWorker<'a> {
+    servo: Servo<'a>,
+    scores: Scores,
 }
 
 impl<'a> Servo<'a> {
@@ -69,7 +110,7 @@ impl<'a> Servo<'a> {
     /// cloud looks like `desired`, searched for in the `prior` region around `initial`
     /// (`world_from_camera`) with the settings of [`crate::VvsConfig::global`].
     /// [`crate::Localizer`] runs it when given a prior box.
-    pub fn localize_in_box<D: AnyImage + Clone>(
+    pub fn localize_in_box<D: AnyImage + Clone + Sync>(
         &mut self,
         desired: &D,
         initial: Isometry3,
@@ -80,7 +121,7 @@ impl<'a> Servo<'a> {
 
     /// [`Servo::localize_in_box`], calling `progress` after each node screened, each
     /// descent and each refinement (a search in a large box runs for seconds).
-    pub fn localize_in_box_with_progress<D: AnyImage + Clone>(
+    pub fn localize_in_box_with_progress<D: AnyImage + Clone + Sync>(
         &mut self,
         desired: &D,
         initial: Isometry3,
@@ -111,7 +152,7 @@ impl<'a> Servo<'a> {
             desired.downsampled(factor, &self.levels[search].camera)?
         };
         // `[θwX, θwY, θwZ]` of each orientation, radians (tilts and heading).
-        let (angles, mut orientations) = self.orientations(
+        let (angles, orientations) = self.orientations(
             search,
             &desired_small,
             prior,
@@ -132,17 +173,25 @@ impl<'a> Servo<'a> {
         let common = self.config.support == Support::Common;
         let mut screened: Vec<Candidate> = Vec::with_capacity(nodes.len() * angles.len());
         let mut squared: Vec<Candidate> = Vec::new();
-        for index in 0..nodes.len() {
-            self.search_cost(search, &node_pose(index, 0), lambda, &mut orientations)?;
-            for (orientation, &cost) in orientations.costs.iter().enumerate() {
+        let mut scores = Scores::new(angles.len());
+        let node_scores = self.on_workers(
+            0..nodes.len(),
+            &mut scores,
+            &mut |done| report(SearchPhase::Screening, done, nodes.len()),
+            |servo, scores, index| {
+                servo.search_cost(search, &node_pose(index, 0), lambda, &orientations, scores)?;
+                Ok((scores.costs.clone(), scores.squared.clone()))
+            },
+        )?;
+        for (index, (costs, squares)) in node_scores.into_iter().enumerate() {
+            for (orientation, (&cost, &square)) in costs.iter().zip(&squares).enumerate() {
                 if cost.is_finite() {
                     screened.push((cost, index, orientation));
                 }
-                if common && orientations.squared[orientation].is_finite() {
-                    squared.push((orientations.squared[orientation], index, orientation));
+                if common && square.is_finite() {
+                    squared.push((square, index, orientation));
                 }
             }
-            report(SearchPhase::Screening, index + 1, nodes.len());
         }
         let screened = select(screened, squared, common, settings.screened);
         let screening_s = started.elapsed().as_secs_f64();
@@ -176,36 +225,46 @@ impl<'a> Servo<'a> {
             0
         };
         let total = screened.len() + may_run_on;
-        let mut descents: Vec<Descent> = Vec::with_capacity(screened.len());
         let mut descent_iterations = 0;
-        let mut history = Vec::new();
-        for (done, &(_, index, orientation)) in screened.iter().enumerate() {
-            report(SearchPhase::Descents, done, total);
-            let mut pose = node_pose(index, orientation);
-            history.clear();
-            let mut coefficients = self.vignetting_start;
-            let result = self.run_stage(
-                Planned {
-                    cap: first,
-                    ..planned
-                },
-                first,
-                &desired_small,
-                &mut pose,
-                &mut coefficients,
-                &mut history,
-            )?;
-            descent_iterations += result.iterations;
-            let rank =
-                self.descent_rank(search, identity, &pose, lambda, &result, &mut orientations)?;
-            descents.push(Descent {
-                candidate: (index, orientation),
-                pose,
-                coefficients,
-                result,
-                rank,
-            });
-        }
+        report(SearchPhase::Descents, 0, total);
+        let mut descents: Vec<Descent> = self.on_workers(
+            0..screened.len(),
+            &mut scores,
+            &mut |done| report(SearchPhase::Descents, done, total),
+            |servo, scores, k| {
+                let (_, index, orientation) = screened[k];
+                let mut pose = node_pose(index, orientation);
+                let mut coefficients = servo.vignetting_start;
+                let result = servo.run_stage(
+                    Planned {
+                        cap: first,
+                        ..planned
+                    },
+                    first,
+                    &desired_small,
+                    &mut pose,
+                    &mut coefficients,
+                    &mut Vec::new(),
+                )?;
+                let rank = servo.descent_rank(
+                    search,
+                    identity,
+                    &pose,
+                    lambda,
+                    &result,
+                    &orientations,
+                    scores,
+                )?;
+                Ok(Descent {
+                    candidate: (index, orientation),
+                    pose,
+                    coefficients,
+                    result,
+                    rank,
+                })
+            },
+        )?;
+        descent_iterations += descents.iter().map(|d| d.result.iterations).sum::<usize>();
         if pruning {
             // The best by rank run on (a diverged descent or an infinite rank never).
             descents.retain(Descent::ranked);
@@ -216,36 +275,47 @@ impl<'a> Servo<'a> {
             });
             descents.truncate(may_run_on);
             let remaining = settings.descent_iterations - first;
-            for (done, d) in descents.iter_mut().enumerate() {
-                report(SearchPhase::Descents, screened.len() + done, total);
-                history.clear();
-                let on = Planned {
-                    stage: Stage::Pgm {
-                        lambda_star: lambda,
-                        lambda_start: d.result.lambda,
-                        optimise_lambda: true,
-                    },
-                    cap: remaining,
-                    ..planned
-                };
-                let result = self.run_stage(
-                    on,
-                    remaining,
-                    &desired_small,
-                    &mut d.pose,
-                    &mut d.coefficients,
-                    &mut history,
-                )?;
+            let stopped = &descents;
+            let mut run_on = |done| report(SearchPhase::Descents, screened.len() + done, total);
+            let continued = self.on_workers(
+                0..descents.len(),
+                &mut scores,
+                &mut run_on,
+                |servo, scores, k| {
+                    let d = &stopped[k];
+                    let (mut pose, mut coefficients) = (d.pose, d.coefficients);
+                    let on = Planned {
+                        stage: Stage::Pgm {
+                            lambda_star: lambda,
+                            lambda_start: d.result.lambda,
+                            optimise_lambda: true,
+                        },
+                        cap: remaining,
+                        ..planned
+                    };
+                    let result = servo.run_stage(
+                        on,
+                        remaining,
+                        &desired_small,
+                        &mut pose,
+                        &mut coefficients,
+                        &mut Vec::new(),
+                    )?;
+                    let rank = servo.descent_rank(
+                        search,
+                        identity,
+                        &pose,
+                        lambda,
+                        &result,
+                        &orientations,
+                        scores,
+                    )?;
+                    Ok((pose, coefficients, result, rank))
+                },
+            )?;
+            for (d, (pose, coefficients, result, rank)) in descents.iter_mut().zip(continued) {
                 descent_iterations += result.iterations;
-                d.rank = self.descent_rank(
-                    search,
-                    identity,
-                    &d.pose,
-                    lambda,
-                    &result,
-                    &mut orientations,
-                )?;
-                d.result = result;
+                (d.pose, d.coefficients, d.result, d.rank) = (pose, coefficients, result, rank);
             }
         }
         let continued = if pruning { descents.len() } else { 0 };
@@ -271,14 +341,17 @@ impl<'a> Servo<'a> {
         // runs to the full stall window (`intermediate_stall_window` shortens step 1's
         // stages for starts already in the next stage's basin).
         let intermediate_stall_window = self.config.intermediate_stall_window.take();
-        let refinements: Result<Vec<Outcome>, VvsError> = kept
-            .iter()
-            .enumerate()
-            .map(|(rank, &(_, pose))| {
-                report(SearchPhase::Refinements, rank, kept.len());
-                self.run(settings.refine_method, desired, pose)
-            })
-            .collect();
+        report(SearchPhase::Refinements, 0, kept.len());
+        let refinements = self.on_workers(
+            0..kept.len(),
+            &mut scores,
+            &mut |done| {
+                if done < kept.len() {
+                    report(SearchPhase::Refinements, done, kept.len());
+                }
+            },
+            |servo, _, rank| servo.run(settings.refine_method, desired, kept[rank].1),
+        );
         self.config.intermediate_stall_window = intermediate_stall_window;
         for (rank, outcome) in refinements?.into_iter().enumerate() {
             let cost = match outcome.stop {
@@ -319,6 +392,103 @@ impl<'a> Servo<'a> {
         Ok(outcome)
     }
 
+    /// The threads a search spreads its nodes, descents and refinements over: with
+    /// [`VvsConfig::parallel`] the pool's (at most [`MAX_SEARCH_THREADS`], and as many
+    /// as [`SEARCH_WORKERS_BYTES`] holds), else one.
+    fn search_threads(&self) -> usize {
+        if !self.config.parallel {
+            return 1;
+        }
+        let servo_bytes = u64::from(self.camera.width())
+            * u64::from(self.camera.height())
+            * crate::SERVO_BYTES_PER_PIXEL;
+        let by_memory = (SEARCH_WORKERS_BYTES / servo_bytes.max(1)).max(1);
+        rayon::current_num_threads()
+            .clamp(1, MAX_SEARCH_THREADS)
+            .min(usize::try_from(by_memory).unwrap_or(usize::MAX))
+    }
+
+    /// `task` of every item of `items`, the results in the items' order, calling
+    /// `done` with the number of items run so far after each (on one thread) or each
+    /// few a thread (on several). On one thread ([`Servo::search_threads`]) this servo
+    /// runs them with `scores`; on several, each item runs whole on a [`SearchWorker`]
+    /// (taken from `self.workers`, made when none is free; the same settings but on
+    /// one thread each), so which worker runs an item changes nothing of its result.
+    fn on_workers<T: Send>(
+        &mut self,
+        items: Range<usize>,
+        scores: &mut Scores,
+        done: &mut dyn FnMut(usize),
+        task: impl Fn(&mut Servo<'a>, &mut Scores, usize) -> Result<T, VvsError> + Sync,
+    ) -> Result<Vec<T>, VvsError> {
+        let threads = self.search_threads();
+        if threads == 1 || items.len() <= 1 {
+            let mut results = Vec::with_capacity(items.len());
+            for (k, item) in items.enumerate() {
+                results.push(task(self, scores, item)?);
+                done(k + 1);
+            }
+            return Ok(results);
+        }
+        let mut results = Vec::with_capacity(items.len());
+        let per_report = threads * ITEMS_PER_REPORT;
+        let mut first = items.start;
+        while first < items.end {
+            let last = (first + per_report).min(items.end);
+            results.extend(self.in_parallel(first..last, scores.costs.len(), &task)?);
+            done(last - items.start);
+            first = last;
+        }
+        Ok(results)
+    }
+
+    /// [`Servo::on_workers`] on several threads, without reports.
+    fn in_parallel<T: Send>(
+        &mut self,
+        items: Range<usize>,
+        orientations: usize,
+        task: &(impl Fn(&mut Servo<'a>, &mut Scores, usize) -> Result<T, VvsError> + Sync),
+    ) -> Result<Vec<T>, VvsError> {
+        let config = VvsConfig {
+            parallel: false,
+            ..self.config.clone()
+        };
+        let mut workers = std::mem::take(&mut self.workers);
+        for worker in &mut workers {
+            worker.servo.config.clone_from(&config);
+            worker.servo.vignetting_start = self.vignetting_start;
+            worker.scores.costs.resize(orientations, f64::INFINITY);
+            worker.scores.squared.resize(orientations, f64::INFINITY);
+        }
+        let pool = Mutex::new(workers);
+        let (cloud, camera, start) = (self.cloud, &self.camera, self.vignetting_start);
+        let results = items
+            .into_par_iter()
+            .map(|item| {
+                let free = pool.lock().unwrap_or_else(PoisonError::into_inner).pop();
+                let mut worker = match free {
+                    Some(worker) => worker,
+                    None => {
+                        let mut servo = Servo::new(cloud, camera, config.clone())?;
+                        servo.vignetting_start = start;
+                        servo.search_level()?;
+                        SearchWorker {
+                            servo,
+                            scores: Scores::new(orientations),
+                        }
+                    }
+                };
+                let result = task(&mut worker.servo, &mut worker.scores, item);
+                pool.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push(worker);
+                result
+            })
+            .collect();
+        self.workers = pool.into_inner().unwrap_or_else(PoisonError::into_inner);
+        results
+    }
+
     /// How a descent ending at `pose` with `result` ranks (lower is better): on the
     /// common support by the screening's score at its end (the unturned picture), not
     /// by its cost (costs compare pictures normalised over supports of different
@@ -330,12 +500,13 @@ impl<'a> Servo<'a> {
         pose: &Isometry3,
         lambda: f32,
         result: &StageResult,
-        orientations: &mut Orientations,
+        orientations: &Orientations,
+        scores: &mut Scores,
     ) -> Result<f64, VvsError> {
         match (self.config.support == Support::Common, identity) {
             (true, Some(identity)) => {
-                self.search_cost(search, pose, lambda, orientations)?;
-                Ok(orientations.costs[identity])
+                self.search_cost(search, pose, lambda, orientations, scores)?;
+                Ok(scores.costs[identity])
             }
             _ => Ok(result.cost),
         }
@@ -412,11 +583,7 @@ impl<'a> Servo<'a> {
                 ),
             });
         }
-        let mut o = Orientations {
-            costs: vec![f64::INFINITY; angles.len()],
-            squared: vec![f64::INFINITY; angles.len()],
-            ..Orientations::default()
-        };
+        let mut o = Orientations::default();
         let common = self.config.support == Support::Common;
         for &[x, y, heading] in &angles {
             let level = &mut self.levels[search];
@@ -466,8 +633,8 @@ impl<'a> Servo<'a> {
     }
 
     /// The screening's scores at `world_from_camera` on level `level` against each
-    /// orientation's desired picture (into `o.costs`, and `o.squared` on the common
-    /// support; infinite where the pose is outside the cloud's enlarged bounds or sees
+    /// orientation's desired picture of `o` (into `scores.costs`, and `scores.squared`
+    /// on the common support; infinite where the pose is outside the cloud's enlarged bounds or sees
     /// too little of it): the mean squared PGM residual, or on the common support the
     /// fraction of the picture left unexplained by the PGMs' correlation and by their
     /// coefficient of determination ([`crate::global`]).
@@ -476,10 +643,16 @@ impl<'a> Servo<'a> {
         level: usize,
         world_from_camera: &Isometry3,
         lambda: f32,
-        o: &mut Orientations,
+        o: &Orientations,
+        scores: &mut Scores,
     ) -> Result<(), VvsError> {
-        o.costs.fill(f64::INFINITY);
-        o.squared.fill(f64::INFINITY);
+        let Scores {
+            costs,
+            squared,
+            scratch,
+        } = scores;
+        costs.fill(f64::INFINITY);
+        squared.fill(f64::INFINITY);
         if outside(
             self.bounds,
             self.config.bounds_margin_m,
@@ -506,10 +679,9 @@ impl<'a> Servo<'a> {
             // Each orientation on its own common support: the node's hits that the
             // turned picture observes.
             let samples = pgm.samples().len().max(1);
-            for ((((cost, squared), picture), weights), &masked) in o
-                .costs
+            for ((((cost, squared), picture), weights), &masked) in costs
                 .iter_mut()
-                .zip(o.squared.iter_mut())
+                .zip(squared.iter_mut())
                 .zip(&o.pictures)
                 .zip(o.weights.chunks_exact(samples))
                 .zip(&o.masked)
@@ -518,14 +690,14 @@ impl<'a> Servo<'a> {
                     *s = v && *status == PixelStatus::Hit;
                 }
                 let g = pgm.transform(&Restricted::new(&*frame, support)?, lambda)?;
-                o.scratch.clear();
-                o.scratch.extend_from_slice(g);
+                scratch.clear();
+                scratch.extend_from_slice(g);
                 let g_star = desired_pgm.transform(&Restricted::new(picture, support)?, lambda)?;
                 // The two PGMs' correlation and mean squared difference over the
                 // compared samples.
                 let (mut w_sum, mut a_sum, mut b_sum) = (0.0f64, 0.0f64, 0.0f64);
                 let (mut aa, mut bb, mut ab) = (0.0f64, 0.0f64, 0.0f64);
-                for (k, (&a, &b)) in o.scratch.iter().zip(g_star).enumerate() {
+                for (k, (&a, &b)) in scratch.iter().zip(g_star).enumerate() {
                     let w = if masked { f64::from(weights[k]) } else { 1.0 };
                     let (a, b) = (f64::from(a), f64::from(b));
                     w_sum += w;
@@ -561,8 +733,7 @@ impl<'a> Servo<'a> {
         }
         let g = pgm.transform(frame, lambda)?;
         let n = g.len().max(1);
-        for (((cost, desired), weights), &masked) in o
-            .costs
+        for (((cost, desired), weights), &masked) in costs
             .iter_mut()
             .zip(o.desired.chunks_exact(n))
             .zip(o.weights.chunks_exact(n))
@@ -692,14 +863,22 @@ mod tests {
             ..VvsConfig::default()
         };
         let mut servo = Servo::new(&cloud, &camera, config).unwrap();
-        let mut o = Orientations {
+        let mut scores = Scores {
             costs: vec![0.5; 2],
             squared: vec![0.5; 2],
-            ..Orientations::default()
+            ..Scores::default()
         };
         let far = Isometry3::from_translation(DVec3::new(1e4, 0.0, 0.0));
-        servo.search_cost(0, &far, 3.0, &mut o).unwrap();
-        assert!(o.costs.iter().chain(&o.squared).all(|c| c.is_infinite()));
+        servo
+            .search_cost(0, &far, 3.0, &Orientations::default(), &mut scores)
+            .unwrap();
+        assert!(
+            scores
+                .costs
+                .iter()
+                .chain(&scores.squared)
+                .all(|c| c.is_infinite())
+        );
     }
 
     /// The descents refined: the best, then those ranked within `refine_within` of it
@@ -770,23 +949,28 @@ mod tests {
             translation_m: [16.0, 4.0, 3.0],
             rotation_deg: [20.0, 20.0, 30.0],
         };
-        let (angles, mut o) = servo
+        let (angles, o) = servo
             .orientations(search, &small, &twice, &settings, 1, lambda)
             .unwrap();
         assert_eq!(angles.len(), 125);
         let identity = angles.iter().position(|a| *a == [0.0; 3]).unwrap();
         // A grid node of 2 m × 2 m × 1.5 m is at most this far from the truth.
         let near = truth * Isometry3::from_pose_vector([0.8, -0.7, 0.6, 0.0, 0.0, 0.0]).unwrap();
-        servo.search_cost(search, &near, lambda, &mut o).unwrap();
-        let near = [o.costs[identity], o.squared[identity]];
+        let mut scores = Scores::new(angles.len());
+        servo
+            .search_cost(search, &near, lambda, &o, &mut scores)
+            .unwrap();
+        let near = [scores.costs[identity], scores.squared[identity]];
         // A node of the search from a corner of the box (its orientation turned by each
         // of the box's orientations): above the roofs across the street.
         let above =
             Isometry3::from_pose_vector([54.758, -4.8946, 17.917, -2.65819, 0.72759, -0.48506])
                 .unwrap();
-        servo.search_cost(search, &above, lambda, &mut o).unwrap();
+        servo
+            .search_cost(search, &above, lambda, &o, &mut scores)
+            .unwrap();
         let best = |scores: &[f64]| scores.iter().copied().fold(f64::INFINITY, f64::min);
-        let above = [best(&o.costs), best(&o.squared)];
+        let above = [best(&scores.costs), best(&scores.squared)];
         assert!(above.iter().all(|s| s.is_finite()), "{above:?}");
         eprintln!("near the truth: {near:?}; above the roofs, the best orientation: {above:?}");
         for list in 0..2 {

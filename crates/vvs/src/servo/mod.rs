@@ -58,6 +58,9 @@ pub struct Servo<'a> {
     /// The vignetting coefficients' columns.
     columns: [Vec<f32>; 2],
     pub(crate) vignetting_start: [f64; 2],
+    /// The global search's workers (servos of the same cloud, camera and settings, one
+    /// thread each), made on a parallel search's first use and kept for the next.
+    pub(crate) workers: Vec<crate::global::SearchWorker<'a>>,
 }
 
 impl<'a> Servo<'a> {
@@ -98,6 +101,7 @@ impl<'a> Servo<'a> {
             rows9: Vec::new(),
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
+            workers: Vec::new(),
         })
     }
 
