@@ -106,9 +106,10 @@ pub struct Localizer {
     /// a quarter of their iterations (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`, what the speed goals are
     /// stated for); `parallel = true` spreads each rendering (in up to 8 runs) and the
-    /// PGM's convolutions over rayon's threads (on two cores a prepared localisation in
-    /// about four fifths of the time, a global search in 0.88–0.95 of it:
-    /// `docs/RESULTS.md`, "Speed"), the same bits. With a
+    /// PGM's convolutions over rayon's threads, and a global search's nodes, descents
+    /// and refinements (on two cores a prepared localisation in about four fifths of
+    /// the time, a global search in 0.58–0.68 of it: `docs/RESULTS.md`, "Speed"), the
+    /// same bits. With a
     /// prior box, the global search's descents pruned (`global.prune_after_iterations
     /// = 3`, `global.pruned_to = 10`: every screened candidate descends 3 iterations,
     /// the 10 best run on to 10; a search 1.96 → 1.55 s, the same success on the
