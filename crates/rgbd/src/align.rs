@@ -157,11 +157,13 @@ pub struct AlignOptions {
     /// Every `stride`-th pixel of the query, along rows and columns.
     pub stride: u32,
     /// Pairs farther apart are dropped during the first half of the iterations (m).
-    /// It must exceed the most the starting pose's error moves a query point: the
-    /// error's translation plus its rotation (rad) times the farthest point's range
-    /// (5 cm and 3° at 3.5 m: 23 cm). The default suits starts a few centimetres and
-    /// about a degree off, as a dataset's poses are; from farther, the pose can slide
-    /// to where the surfaces that hold it are out of reach and settle there.
+    /// A rule of thumb: more than the most the starting pose's error moves a query
+    /// point, its translation plus its rotation (rad) times the farthest point's range
+    /// (5 cm and 3° at 3.5 m: 23 cm; pairing is along the target camera's rays, so a
+    /// surface seen at a grazing angle pairs farther still). The default suits starts a
+    /// few centimetres and about a degree off, as a dataset's poses are; from farther,
+    /// the pose can slide to where the surfaces that hold it are out of reach and
+    /// settle there.
     pub first_distance_m: f64,
     /// … and during the second half, and in the reported RMS (m).
     pub final_distance_m: f64,

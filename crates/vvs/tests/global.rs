@@ -625,22 +625,24 @@ fn global_converges_from_large_tilts_with_tilt_search() {
 
 /// A parallel search spreads its nodes, descents and refinements over the pool, each
 /// whole on a servo of its own: the same bits as on one thread, in pools of 2 and 3
-/// threads (a servo reused for a second search included), its progress reported too.
+/// threads (a servo reused for a second search included), with the paper's settings and
+/// a vignetting started off zero, and with the localiser's (the common support, a
+/// stall window shortened but for the refinements, two levels); its progress reported
+/// phase by phase in a pool of two.
 #[test]
 fn a_search_gives_the_same_bits_on_any_number_of_threads() {
     let prior = PriorBox {
         translation_m: [2.0, 1.0, 0.5],
         rotation_deg: [2.0, 2.0, 6.0],
     };
-    let mut config = VvsConfig {
-        keep_history: true,
+    let paper = VvsConfig {
+        vignetting: true,
         ..VvsConfig::default()
     };
-    config.global.prune_after_iterations = 3;
-    config.global.pruned_to = 6;
-    config.global.refined = 3;
-    config.global.refine_within = f64::INFINITY;
-    config.global.merge_distance_m = 0.0;
+    let localizer = VvsConfig {
+        parallel: true,
+        ..vvs::Localizer::default().config
+    };
     let starts = [
         offset([0.6, -0.2, 0.1, 0.01, 0.0, 0.02]),
         offset([-0.7, 0.3, -0.2, 0.0, 0.02, -0.08]),
@@ -665,35 +667,53 @@ fn a_search_gives_the_same_bits_on_any_number_of_threads() {
                 .collect::<Vec<_>>(),
         )
     };
-    let servo = |config| Servo::new(&city().cloud, &fixture(), config).unwrap();
-    let mut alone = servo(VvsConfig {
-        parallel: false,
-        ..config.clone()
-    });
-    let desired = alone.render(&desired_pose()).unwrap();
-    let expected: Vec<_> = starts
-        .iter()
-        .map(|&start| strip(&alone.localize_in_box(&desired, start, &prior).unwrap()))
-        .collect();
-    // More than one refinement, so that they too ran on several threads.
-    assert!(expected.iter().any(|e| e.7.len() > 1), "{expected:?}");
-    for threads in [2, 3] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let mut servo = servo(config.clone());
-        for (start, expected) in starts.iter().zip(&expected) {
-            let mut events = 0;
-            let outcome = pool
-                .install(|| {
-                    servo.localize_in_box_with_progress(&desired, *start, &prior, &mut |_| {
-                        events += 1
-                    })
-                })
+    for mut config in [paper, localizer] {
+        config.keep_history = true;
+        config.global.prune_after_iterations = 3;
+        config.global.pruned_to = 6;
+        config.global.refined = 3;
+        config.global.refine_within = f64::INFINITY;
+        config.global.merge_distance_m = 0.0;
+        let servo =
+            |config: &VvsConfig| Servo::new(&city().cloud, &fixture(), config.clone()).unwrap();
+        // Each search from a vignetting of its own (a tracker passes its estimate on).
+        let vignetting = |k: usize| [0.05 * (k + 1) as f64, -0.02];
+        let mut alone = servo(&VvsConfig {
+            parallel: false,
+            ..config.clone()
+        });
+        let desired = alone.render(&desired_pose()).unwrap();
+        let expected: Vec<_> = starts
+            .iter()
+            .enumerate()
+            .map(|(k, &start)| {
+                alone.set_vignetting_start(vignetting(k));
+                strip(&alone.localize_in_box(&desired, start, &prior).unwrap())
+            })
+            .collect();
+        // More than one refinement, so that they too ran on several threads.
+        assert!(expected.iter().any(|e| e.7.len() > 1), "{expected:?}");
+        for threads in [2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
                 .unwrap();
-            assert_eq!(&strip(&outcome), expected, "{threads} threads");
-            assert!(events >= 3, "{events} progress reports");
+            let mut servo = servo(&config);
+            for (k, (start, expected)) in starts.iter().zip(&expected).enumerate() {
+                servo.set_vignetting_start(vignetting(k));
+                let outcome = pool
+                    .install(|| servo.localize_in_box(&desired, *start, &prior))
+                    .unwrap();
+                assert_eq!(&strip(&outcome), expected, "{threads} threads");
+            }
         }
     }
+    let mut pruned = VvsConfig::default();
+    pruned.global.prune_after_iterations = 3;
+    pruned.global.pruned_to = 6;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    pool.install(|| progress_phase_by_phase(pruned, &prior, 6));
 }

@@ -7,6 +7,7 @@
 //! taken in the items' order, so a search gives the same bits on any number of threads.
 
 use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
 
@@ -120,7 +121,8 @@ impl<'a> Servo<'a> {
     }
 
     /// [`Servo::localize_in_box`], calling `progress` after each node screened, each
-    /// descent and each refinement (a search in a large box runs for seconds).
+    /// descent and each refinement on one thread, after every few a thread on several
+    /// (a search in a large box runs for seconds).
     pub fn localize_in_box_with_progress<D: AnyImage + Clone + Sync>(
         &mut self,
         desired: &D,
@@ -174,24 +176,40 @@ impl<'a> Servo<'a> {
         let mut screened: Vec<Candidate> = Vec::with_capacity(nodes.len() * angles.len());
         let mut squared: Vec<Candidate> = Vec::new();
         let mut scores = Scores::new(angles.len());
-        let node_scores = self.on_workers(
-            0..nodes.len(),
-            &mut scores,
-            &mut |done| report(SearchPhase::Screening, done, nodes.len()),
-            |servo, scores, index| {
-                servo.search_cost(search, &node_pose(index, 0), lambda, &orientations, scores)?;
-                Ok((scores.costs.clone(), scores.squared.clone()))
-            },
-        )?;
-        for (index, (costs, squares)) in node_scores.into_iter().enumerate() {
-            for (orientation, (&cost, &square)) in costs.iter().zip(&squares).enumerate() {
-                if cost.is_finite() {
-                    screened.push((cost, index, orientation));
-                }
-                if common && square.is_finite() {
-                    squared.push((square, index, orientation));
+        // The scores of a batch of nodes at a time (what a thread screens between two
+        // reports), taken into the lists as they come.
+        let batch = self.search_threads() * ITEMS_PER_REPORT;
+        let mut first_node = 0;
+        while first_node < nodes.len() {
+            let last_node = (first_node + batch).min(nodes.len());
+            let node_scores = self.on_workers(
+                first_node..last_node,
+                &mut scores,
+                &mut |_| (),
+                |servo, scores, index| {
+                    servo.search_cost(
+                        search,
+                        &node_pose(index, 0),
+                        lambda,
+                        &orientations,
+                        scores,
+                    )?;
+                    let pairs = scores.costs.iter().zip(&scores.squared);
+                    Ok(pairs.map(|(&c, &s)| (c, s)).collect::<Vec<_>>())
+                },
+            )?;
+            for (index, node) in (first_node..).zip(node_scores) {
+                for (orientation, &(cost, square)) in node.iter().enumerate() {
+                    if cost.is_finite() {
+                        screened.push((cost, index, orientation));
+                    }
+                    if common && square.is_finite() {
+                        squared.push((square, index, orientation));
+                    }
                 }
             }
+            report(SearchPhase::Screening, last_node, nodes.len());
+            first_node = last_node;
         }
         let screened = select(screened, squared, common, settings.screened);
         let screening_s = started.elapsed().as_secs_f64();
@@ -435,17 +453,20 @@ impl<'a> Servo<'a> {
         let mut first = items.start;
         while first < items.end {
             let last = (first + per_report).min(items.end);
-            results.extend(self.in_parallel(first..last, scores.costs.len(), &task)?);
+            results.extend(self.in_parallel(first..last, threads, scores.costs.len(), &task)?);
             done(last - items.start);
             first = last;
         }
         Ok(results)
     }
 
-    /// [`Servo::on_workers`] on several threads, without reports.
+    /// [`Servo::on_workers`] on `threads` threads, without reports: each thread takes a
+    /// worker and runs the next item not taken until none is left (so at most
+    /// `threads` workers are made); the first error in the items' order is returned.
     fn in_parallel<T: Send>(
         &mut self,
         items: Range<usize>,
+        threads: usize,
         orientations: usize,
         task: &(impl Fn(&mut Servo<'a>, &mut Scores, usize) -> Result<T, VvsError> + Sync),
     ) -> Result<Vec<T>, VvsError> {
@@ -461,32 +482,53 @@ impl<'a> Servo<'a> {
             worker.scores.squared.resize(orientations, f64::INFINITY);
         }
         let pool = Mutex::new(workers);
+        let next = AtomicUsize::new(items.start);
         let (cloud, camera, start) = (self.cloud, &self.camera, self.vignetting_start);
-        let results = items
+        let runs: Vec<Vec<(usize, Result<T, VvsError>)>> = (0..threads.min(items.len()))
             .into_par_iter()
-            .map(|item| {
+            .map(|_| {
+                let mut done = Vec::new();
                 let free = pool.lock().unwrap_or_else(PoisonError::into_inner).pop();
                 let mut worker = match free {
                     Some(worker) => worker,
                     None => {
-                        let mut servo = Servo::new(cloud, camera, config.clone())?;
-                        servo.vignetting_start = start;
-                        servo.search_level()?;
-                        SearchWorker {
-                            servo,
-                            scores: Scores::new(orientations),
+                        let made =
+                            Servo::new(cloud, camera, config.clone()).and_then(|mut servo| {
+                                servo.vignetting_start = start;
+                                servo.search_level()?;
+                                Ok(servo)
+                            });
+                        match made {
+                            Ok(servo) => SearchWorker {
+                                servo,
+                                scores: Scores::new(orientations),
+                            },
+                            Err(e) => {
+                                done.push((items.start, Err(e)));
+                                return done;
+                            }
                         }
                     }
                 };
-                let result = task(&mut worker.servo, &mut worker.scores, item);
+                loop {
+                    let item = next.fetch_add(1, Ordering::Relaxed);
+                    if item >= items.end {
+                        break;
+                    }
+                    done.push((item, task(&mut worker.servo, &mut worker.scores, item)));
+                }
                 pool.lock()
                     .unwrap_or_else(PoisonError::into_inner)
                     .push(worker);
-                result
+                done
             })
             .collect();
         self.workers = pool.into_inner().unwrap_or_else(PoisonError::into_inner);
-        results
+        let mut results: Vec<(usize, Result<T, VvsError>)> = runs.into_iter().flatten().collect();
+        // A worker that could not be made reports its error at the first item: before
+        // that item's result.
+        results.sort_by_key(|(item, result)| (*item, result.is_ok()));
+        results.into_iter().map(|(_, result)| result).collect()
     }
 
     /// How a descent ending at `pose` with `result` ranks (lower is better): on the
