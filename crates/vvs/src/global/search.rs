@@ -243,6 +243,33 @@ impl<'a> Servo<'a> {
             0
         };
         let total = screened.len() + may_run_on;
+        // One descent's stage from `pose` (updated in place), and its rank where it ends.
+        let descend = |servo: &mut Servo<'a>,
+                       scores: &mut Scores,
+                       planned: Planned,
+                       pose: &mut Isometry3,
+                       coefficients: &mut [f64; 2]|
+         -> Result<(StageResult, f64), VvsError> {
+            let budget = planned.cap;
+            let result = servo.run_stage(
+                planned,
+                budget,
+                &desired_small,
+                pose,
+                coefficients,
+                &mut Vec::new(),
+            )?;
+            let rank = servo.descent_rank(
+                search,
+                identity,
+                pose,
+                lambda,
+                &result,
+                &orientations,
+                scores,
+            )?;
+            Ok((result, rank))
+        };
         let mut descent_iterations = 0;
         report(SearchPhase::Descents, 0, total);
         let mut descents: Vec<Descent> = self.on_workers(
@@ -253,25 +280,15 @@ impl<'a> Servo<'a> {
                 let (_, index, orientation) = screened[k];
                 let mut pose = node_pose(index, orientation);
                 let mut coefficients = servo.vignetting_start;
-                let result = servo.run_stage(
+                let (result, rank) = descend(
+                    servo,
+                    scores,
                     Planned {
                         cap: first,
                         ..planned
                     },
-                    first,
-                    &desired_small,
                     &mut pose,
                     &mut coefficients,
-                    &mut Vec::new(),
-                )?;
-                let rank = servo.descent_rank(
-                    search,
-                    identity,
-                    &pose,
-                    lambda,
-                    &result,
-                    &orientations,
-                    scores,
                 )?;
                 Ok(Descent {
                     candidate: (index, orientation),
@@ -311,23 +328,7 @@ impl<'a> Servo<'a> {
                         cap: remaining,
                         ..planned
                     };
-                    let result = servo.run_stage(
-                        on,
-                        remaining,
-                        &desired_small,
-                        &mut pose,
-                        &mut coefficients,
-                        &mut Vec::new(),
-                    )?;
-                    let rank = servo.descent_rank(
-                        search,
-                        identity,
-                        &pose,
-                        lambda,
-                        &result,
-                        &orientations,
-                        scores,
-                    )?;
+                    let (result, rank) = descend(servo, scores, on, &mut pose, &mut coefficients)?;
                     Ok((pose, coefficients, result, rank))
                 },
             )?;
