@@ -165,6 +165,16 @@ pub struct VvsConfig {
     /// stage but the global search's low-resolution descents (ranked after a set
     /// number of iterations).
     pub converged_px: Option<f32>,
+    /// Beyond the paper (`None`: off, every iteration renders): a PGM stage on the
+    /// common support renders only when the pose has moved the image by more than this
+    /// many pixels of its level since the last rendering (`α (‖t‖ / ρ̄ + ‖ω‖)`, as
+    /// `converged_px` measures), or λ by more than a fifth; in between, the picture is
+    /// warped into the last rendering through its ranges, both are transformed on their
+    /// common support, and the step takes that rendering's `L_G` and `J_λ` (the inverse
+    /// compositional scheme: the residual exact, the Jacobian the last rendering's).
+    /// Brightness stages (PoVS), the paper's support and the vignetting model render
+    /// at every iteration.
+    pub rerender_px: Option<f32>,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
     pub divergence_cost_factor: f64,
     /// Divergence: fewer than this fraction of the valid pixels see a point.
@@ -239,6 +249,7 @@ impl Default for VvsConfig {
             intermediate_stall_window: None,
             stall_relative_decrease: 0.01,
             converged_px: None,
+            rerender_px: None,
             divergence_cost_factor: 1e3,
             min_hit_fraction: 0.02,
             bounds_margin_m: 5.0,
@@ -331,6 +342,11 @@ impl VvsConfig {
             && !(px > 0.0 && px.is_finite())
         {
             return bad("converged_px", format!("must be > 0, got {px}"));
+        }
+        if let Some(px) = self.rerender_px
+            && !(px > 0.0 && px.is_finite())
+        {
+            return bad("rerender_px", format!("must be > 0, got {px}"));
         }
         if !(0.0..1.0).contains(&self.stall_relative_decrease) {
             return bad(

@@ -119,6 +119,15 @@ pub struct IterationRecord {
     pub update_rotation_rad: f64,
     /// Wall time of the iteration (render + feature + solve), seconds.
     pub time_s: f64,
+    /// Whether the iteration rendered the cloud (`false`: it compared the picture
+    /// warped into the last rendering, [`crate::VvsConfig::rerender_px`]).
+    #[serde(default = "rendered_by_default")]
+    pub rendered: bool,
+}
+
+/// Histories written before [`IterationRecord::rendered`] rendered at every iteration.
+fn rendered_by_default() -> bool {
+    true
 }
 
 /// The result of a run.

@@ -66,6 +66,9 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         ("converged_px = -1.0", "converged_px"),
         ("converged_px = inf", "converged_px"),
         ("converged_px = nan", "converged_px"),
+        ("rerender_px = 0.0", "rerender_px"),
+        ("rerender_px = -2.0", "rerender_px"),
+        ("rerender_px = nan", "rerender_px"),
         (
             "step1_max_iterations = 2\nlambda_schedule = [7.5, 3.0]",
             "step1_max_iterations",

@@ -382,6 +382,7 @@ fn a_short_stall_window_in_step_one_ends_at_the_same_place_sooner() {
     let full = VvsConfig {
         intermediate_stall_window: None,
         converged_px: None,
+        rerender_px: None,
         keep_history: false,
         ..vvs::Localizer::default().config
     };
@@ -424,4 +425,65 @@ fn convergence_in_pixels_ends_at_the_same_place_sooner() {
     let (apart, _) = a.world_from_camera.distance_to(&b.world_from_camera);
     assert!(apart < 0.002, "{apart} m apart");
     assert!(3 * nb <= 2 * na, "{nb} against {na} iterations");
+}
+
+/// Rendering only when the image has moved (`rerender_px`, in between the picture
+/// warped into the last rendering): the same place as rendering at every iteration,
+/// with fewer renderings, on the city's rendering and on its picture as a camera
+/// takes it (vignetting, gain, blur, noise).
+#[test]
+fn rendering_only_when_the_image_moves_ends_at_the_same_place_with_fewer_renderings() {
+    let every = VvsConfig {
+        keep_history: true,
+        parallel: false,
+        rerender_px: None,
+        ..vvs::Localizer::default().config
+    };
+    let warped = VvsConfig {
+        rerender_px: Some(1.0),
+        ..every.clone()
+    };
+    let rendered = |o: &vvs::Outcome| o.history.iter().filter(|r| r.rendered).count();
+    let [(a, ta), (b, tb)] = rule2_from_half_a_metre([every.clone(), warped.clone()]);
+    eprintln!(
+        "every iteration: {ta} m, {:?}, {} renderings; warped: {tb} m, {:?}, {} renderings",
+        a.iterations,
+        rendered(&a),
+        b.iterations,
+        rendered(&b)
+    );
+    assert_eq!(rendered(&a), a.history.len());
+    assert!(ta < 0.005 && tb < 0.005, "{ta} m, {tb} m");
+    let (apart, _) = a.world_from_camera.distance_to(&b.world_from_camera);
+    assert!(apart < 0.005, "{apart} m apart");
+    assert!(
+        3 * rendered(&b) <= 2 * rendered(&a),
+        "{} against {} renderings",
+        rendered(&b),
+        rendered(&a)
+    );
+    // A picture as the camera takes it.
+    let camera = fixture();
+    let mut servo = Servo::new(&city().cloud, &camera, every.clone()).unwrap();
+    let picture = world::Acquisition::default().acquire(
+        &servo.render(&desired_pose()).unwrap(),
+        &camera,
+        0,
+        0.0,
+    );
+    let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
+    let a = servo.run(Method::Rule2, &picture, start).unwrap();
+    let b = Servo::new(&city().cloud, &camera, warped)
+        .unwrap()
+        .run(Method::Rule2, &picture, start)
+        .unwrap();
+    let (ta, _) = a.world_from_camera.distance_to(&desired_pose());
+    let (tb, _) = b.world_from_camera.distance_to(&desired_pose());
+    eprintln!(
+        "acquired: every iteration {ta} m, {} renderings; warped {tb} m, {} renderings",
+        rendered(&a),
+        rendered(&b)
+    );
+    assert!(ta < 0.01 && tb < 0.01, "{ta} m, {tb} m");
+    assert!(3 * rendered(&b) <= 2 * rendered(&a));
 }

@@ -5,6 +5,7 @@
 
 mod level;
 mod stage;
+mod warp;
 
 use std::time::Instant;
 

@@ -4,11 +4,12 @@
 use std::time::Instant;
 
 use brightness::{Against, normal_equations, normal_equations_with_column};
-use frame::{AnyImage, Frame, PixelStatus, Restricted};
+use frame::{AnyImage, Frame, Image, PixelStatus, Restricted};
 use glam::DVec3;
 use pgm::Pgm;
 use ucm::{Camera, Isometry3};
 
+use super::warp::{self, Reference};
 use super::{Level, render_once};
 use crate::solve::solve;
 use crate::vignetting::MAX_COEFFICIENT;
@@ -173,8 +174,24 @@ impl Servo<'_> {
             support,
             against,
             against_observed,
+            points,
+            warped,
         } = &mut self.levels[level];
         let common = self.config.support == Support::Common;
+        // Beyond the paper: iterations between renderings compare the picture warped
+        // into the last one (`VvsConfig::rerender_px`).
+        // With the desired extent λ* the warped picture is transformed at.
+        let rerender_px = match stage {
+            Stage::Pgm { lambda_star, .. } if common && vignetting.is_none() => {
+                self.config.rerender_px.map(|px| (px, lambda_star))
+            }
+            _ => None,
+        };
+        if rerender_px.is_some() && points.len() != camera.pixel_count() {
+            points.resize(camera.pixel_count(), [f32::NAN; 3]);
+            *warped = Image::new(camera.width(), camera.height());
+        }
+        let mut reference: Option<Reference> = None;
         // The desired feature, fixed for the stage (on the common support: taken again
         // at every iteration).
         let (mut lambda, optimise_lambda) = match stage {
@@ -208,10 +225,22 @@ impl Servo<'_> {
         let (stop, iterations) = 'stage: {
             for iteration in 0..budget {
                 let started = Instant::now();
-                let stats = render_once(renderer, rendered_at, self.cloud, pose, frame)?;
-                let hits = stats.pixels_hit as f64;
-                if hits / valid_count < self.config.min_hit_fraction {
-                    break 'stage (StopReason::Diverged(Divergence::NoValidPixels), iteration);
+                // The rendering this iteration compares with, when it is not rendered.
+                let between = match (rerender_px, &reference) {
+                    (Some((px, lambda_star)), Some(r))
+                        if (lambda - r.lambda).abs() <= 0.2 * r.lambda
+                            && r.image_motion_px(camera, pose) <= f64::from(px) =>
+                    {
+                        Some((*r, lambda_star))
+                    }
+                    _ => None,
+                };
+                if between.is_none() {
+                    let stats = render_once(renderer, rendered_at, self.cloud, pose, frame)?;
+                    let hits = stats.pixels_hit as f64;
+                    if hits / valid_count < self.config.min_hit_fraction {
+                        break 'stage (StopReason::Diverged(Divergence::NoValidPixels), iteration);
+                    }
                 }
                 // The rendering as the camera would see it (with the vignetting model).
                 let input: &Frame = match vignetting {
@@ -222,7 +251,25 @@ impl Servo<'_> {
                     None => frame,
                 };
                 // Feature, residuals, rows.
-                if common {
+                if let Some((r, lambda_star)) = between {
+                    // The picture seen from the rendering; both transformed on their
+                    // common support, the rows (`L_G`, `J_λ`) the rendering's.
+                    warp::warp(
+                        camera,
+                        points,
+                        &(pose.inverse() * r.world_from_reference),
+                        desired,
+                        warped,
+                    );
+                    support.copy_from_slice(&warped.valid);
+                    let compared = support.iter().filter(|&&s| s).count();
+                    coverage = compared as f64 / r.observed.max(1) as f64;
+                    self.desired.clear();
+                    self.desired.extend_from_slice(
+                        desired_pgm.transform(&Restricted::new(&*warped, support)?, lambda_star)?,
+                    );
+                    pgm.transform(&Restricted::new(input, support)?, lambda)?;
+                } else if common {
                     // The pixels compared: the rendering's hits the picture observes.
                     desired.observed(0..support.len(), against_observed);
                     for ((s, &o), status) in support
@@ -280,6 +327,15 @@ impl Servo<'_> {
                         Stage::Pgm { .. } => {
                             pgm.compute_against(&view, against, lambda, self.config.jacobian)?
                         }
+                    }
+                    if rerender_px.is_some() {
+                        warp::lift(camera, frame, points);
+                        reference = Some(Reference {
+                            world_from_reference: *pose,
+                            lambda,
+                            mean_inverse_range: warp::mean_inverse_range(frame),
+                            observed,
+                        });
                     }
                 } else {
                     compute_feature(stage, pgm, input, lambda, self.config.jacobian)?;
@@ -433,12 +489,16 @@ impl Servo<'_> {
                         update_translation_m: update_t,
                         update_rotation_rad: update_r,
                         time_s: started.elapsed().as_secs_f64(),
+                        rendered: between.is_none(),
                     });
                 }
                 let Ok(update) = Isometry3::exp(v) else {
                     break 'stage (StopReason::Diverged(Divergence::NotFinite), iteration + 1);
                 };
-                *pose = *pose * update;
+                *pose = match between {
+                    Some((r, _)) => warp::compose(&r.world_from_reference, update, pose),
+                    None => *pose * update,
+                };
                 if vignetting.is_some() {
                     for (c, dc) in coefficients.iter_mut().zip(coefficient_update) {
                         *c = (*c - gain * dc).clamp(-MAX_COEFFICIENT, MAX_COEFFICIENT);

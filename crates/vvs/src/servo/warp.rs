@@ -1,0 +1,262 @@
+//! Beyond the paper ([`crate::VvsConfig::rerender_px`]): between two renderings, the
+//! picture warped into the last one through its ranges, so that an iteration compares
+//! without rendering (the inverse compositional scheme of Baker and Matthews, 2004,
+//! with the rendering as the template).
+//!
+//! A rendering at `world_from_reference` sees, at pixel `k`, the point `X_k = ρ_k d_k`
+//! of its camera frame (`d_k` the pixel's ray, `ρ_k` its range). A camera at
+//! `world_from_camera` sees that point at `π(camera_from_reference X_k)`: the picture
+//! sampled there (bilinearly) is what the picture shows at pixel `k` of the rendering
+//! if the pose is right. Moving the rendering's camera by `v` warps the rendering like
+//! a camera moved by `−v`, so the law's `v` (from the rendering's `L_G`, computed once)
+//! updates the pose as `world_from_reference · exp(v) · reference_from_camera`
+//! ([`compose`]).
+
+use frame::{AnyImage, Frame, Image, PixelStatus};
+use glam::{Mat3, Vec3};
+use ucm::{Camera, Isometry3};
+
+/// What an iteration between renderings compares against: the rendering's pose, λ
+/// and the scale of its image motion, fixed when it was rendered.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Reference {
+    /// The pose the level's frame was rendered at.
+    pub(crate) world_from_reference: Isometry3,
+    /// λ when the rendering's `L_G` and `J_λ` were computed.
+    pub(crate) lambda: f32,
+    /// `1/ρ̄`, the mean inverse range of the rendering's hits (m⁻¹).
+    pub(crate) mean_inverse_range: f64,
+    /// How many pixels of the picture hold an intensity (the coverage's denominator).
+    pub(crate) observed: usize,
+}
+
+impl Reference {
+    /// How far `world_from_camera` moves the image of the rendering, in pixels of
+    /// `camera` (`α (‖t‖ / ρ̄ + ‖ω‖)`, as the test in pixels measures an update).
+    pub(crate) fn image_motion_px(&self, camera: &Camera, world_from_camera: &Isometry3) -> f64 {
+        let [tx, ty, tz, wx, wy, wz] =
+            (self.world_from_reference.inverse() * *world_from_camera).log();
+        let i = camera.intrinsics();
+        let t = (tx * tx + ty * ty + tz * tz).sqrt();
+        let w = (wx * wx + wy * wy + wz * wz).sqrt();
+        i.alpha_u.max(i.alpha_v) * (t * self.mean_inverse_range + w)
+    }
+}
+
+/// The pose after the update `v` of an iteration that compared in the rendering taken
+/// at `world_from_reference`: `world_from_reference · exp(v) · reference_from_camera`.
+pub(crate) fn compose(
+    world_from_reference: &Isometry3,
+    update: Isometry3,
+    world_from_camera: &Isometry3,
+) -> Isometry3 {
+    *world_from_reference * update * (world_from_reference.inverse() * *world_from_camera)
+}
+
+/// Each hit of `frame` as the point of its camera frame it sees (`ρ d`, metres), NaN
+/// where `frame` sees no point or its range is unknown.
+pub(crate) fn lift(camera: &Camera, frame: &Frame, points: &mut [[f32; 3]]) {
+    let w = camera.width() as usize;
+    for (k, ((p, &status), &range_m)) in points
+        .iter_mut()
+        .zip(&frame.status)
+        .zip(&frame.range_m)
+        .enumerate()
+    {
+        *p = [f32::NAN; 3];
+        if status != PixelStatus::Hit || !(range_m > 0.0 && range_m.is_finite()) {
+            continue;
+        }
+        if let Ok(d) = camera.unproject([(k % w) as f32, (k / w) as f32]) {
+            *p = d.map(|c| c * range_m);
+        }
+    }
+}
+
+/// The mean inverse range of `frame`'s hits with a positive range (m⁻¹; infinite
+/// without any, so that a translation's effect is unknown).
+pub(crate) fn mean_inverse_range(frame: &Frame) -> f64 {
+    let (mut inverse_sum, mut hits) = (0.0f64, 0usize);
+    for (&range_m, &status) in frame.range_m.iter().zip(&frame.status) {
+        if status == PixelStatus::Hit && range_m > 0.0 {
+            inverse_sum += 1.0 / f64::from(range_m);
+            hits += 1;
+        }
+    }
+    if hits == 0 {
+        f64::INFINITY
+    } else {
+        inverse_sum / hits as f64
+    }
+}
+
+/// `picture` seen from the rendering whose points are `points`: pixel `k` of `out`
+/// takes the picture bilinearly at `π(camera_from_reference X_k)`, valid where `X_k` is
+/// known, projects inside the picture and its four neighbours hold an intensity.
+pub(crate) fn warp(
+    camera: &Camera,
+    points: &[[f32; 3]],
+    camera_from_reference: &Isometry3,
+    picture: &impl AnyImage,
+    out: &mut Image,
+) {
+    let rotation = Mat3::from_quat(camera_from_reference.rotation.as_quat());
+    let translation = camera_from_reference.translation.as_vec3();
+    let (w, h) = (picture.width() as usize, picture.height() as usize);
+    let intensity = picture.intensity();
+    for ((o, valid), p) in out
+        .intensity
+        .iter_mut()
+        .zip(out.valid.iter_mut())
+        .zip(points)
+    {
+        *o = 0.0;
+        *valid = false;
+        if p[0].is_nan() {
+            continue;
+        }
+        let q = rotation * Vec3::from_array(*p) + translation;
+        let Ok([u, v]) = camera.project_unbounded(q.to_array()) else {
+            continue;
+        };
+        // The four pixels around (u, v): pixel (i, j) is centred at (i, j).
+        let (x0, y0) = (u.floor(), v.floor());
+        if !(x0 >= 0.0 && y0 >= 0.0 && x0 + 1.0 < w as f32 && y0 + 1.0 < h as f32) {
+            continue;
+        }
+        let (fx, fy) = (u - x0, v - y0);
+        let k = y0 as usize * w + x0 as usize;
+        let corners = [k, k + 1, k + w, k + w + 1];
+        if !corners.iter().all(|&c| picture.is_observed(c)) {
+            continue;
+        }
+        let [a, b, c, d] = corners.map(|c| intensity[c]);
+        *o = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
+        *valid = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+    use splat::PointCloud;
+
+    use super::*;
+
+    /// A textured plane of 1.5 cm points, 6 m by 6 m, and the fixture camera (which
+    /// sees 50° to 120° off its axis).
+    fn plane() -> (PointCloud, Camera) {
+        let (_, camera) = crate::servo::test_plane();
+        let positions: Vec<DVec3> = (0..400 * 400)
+            .map(|k| DVec3::new(f64::from(k % 400) * 0.015, f64::from(k / 400) * 0.015, 0.0))
+            .collect();
+        let intensities: Vec<f32> = positions
+            .iter()
+            .map(|p| (0.5 + 0.4 * (p.x * 5.0).sin() * (p.y * 3.0).cos()) as f32)
+            .collect();
+        let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, None)
+            .expect("a valid cloud");
+        (cloud, camera)
+    }
+
+    /// At the reference itself the warp gives the picture back at every hit whose
+    /// neighbours are observed (a point of pixel `k` projects back onto `k`).
+    #[test]
+    fn the_warp_at_the_reference_is_the_picture() {
+        let (cloud, camera) = plane();
+        let pose = Isometry3::from_pose_vector([3.0, 3.0, -0.4, 0.0, 0.0, 0.0]).unwrap();
+        let mut renderer =
+            splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        renderer
+            .render(&cloud, &pose.inverse(), &mut frame)
+            .unwrap();
+        let mut points = vec![[0.0; 3]; camera.pixel_count()];
+        lift(&camera, &frame, &mut points);
+        let picture = Image::from_frame(&frame);
+        let mut out = Image::new(camera.width(), camera.height());
+        warp(&camera, &points, &Isometry3::IDENTITY, &picture, &mut out);
+        let mut compared = 0;
+        for k in 0..camera.pixel_count() {
+            if out.valid[k] {
+                compared += 1;
+                assert!(
+                    (out.intensity[k] - picture.intensity[k]).abs() < 1e-3,
+                    "pixel {k}: {} against {}",
+                    out.intensity[k],
+                    picture.intensity[k]
+                );
+            }
+        }
+        assert!(compared > 5000, "{compared} pixels compared");
+    }
+
+    /// A picture taken elsewhere, warped into the rendering, shows what the rendering
+    /// shows (and unwarped, it does not): the warp goes from the rendering to the
+    /// picture's camera, and [`compose`] undoes a motion of the rendering's camera.
+    #[test]
+    fn a_picture_warped_into_the_rendering_matches_it() {
+        let (cloud, camera) = plane();
+        let world_from_reference =
+            Isometry3::from_pose_vector([3.0, 3.0, -0.4, 0.0, 0.0, 0.0]).unwrap();
+        let world_from_camera = world_from_reference
+            * Isometry3::from_pose_vector([0.05, -0.03, 0.02, 0.01, -0.02, 0.015]).unwrap();
+        let mut renderer =
+            splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
+        let mut reference = Frame::for_camera(&camera);
+        renderer
+            .render(&cloud, &world_from_reference.inverse(), &mut reference)
+            .unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        renderer
+            .render(&cloud, &world_from_camera.inverse(), &mut frame)
+            .unwrap();
+        let picture = Image::from_frame(&frame);
+        let mut points = vec![[0.0; 3]; camera.pixel_count()];
+        lift(&camera, &reference, &mut points);
+        let mut out = Image::new(camera.width(), camera.height());
+        let mean_difference = |out: &Image| {
+            let (mut sum, mut n) = (0.0f64, 0usize);
+            for k in 0..camera.pixel_count() {
+                if out.valid[k] {
+                    sum += f64::from((out.intensity[k] - reference.intensity[k]).abs());
+                    n += 1;
+                }
+            }
+            (sum / n.max(1) as f64, n)
+        };
+        warp(
+            &camera,
+            &points,
+            &(world_from_camera.inverse() * world_from_reference),
+            &picture,
+            &mut out,
+        );
+        let (warped, n) = mean_difference(&out);
+        warp(&camera, &points, &Isometry3::IDENTITY, &picture, &mut out);
+        let (unwarped, _) = mean_difference(&out);
+        // The inverse motion: the wrong way round.
+        warp(
+            &camera,
+            &points,
+            &(world_from_reference.inverse() * world_from_camera),
+            &picture,
+            &mut out,
+        );
+        let (inverse, _) = mean_difference(&out);
+        assert!(n > 5000, "{n} pixels compared");
+        assert!(
+            warped < 0.25 * unwarped && warped < 0.25 * inverse,
+            "warped {warped}, unwarped {unwarped}, the inverse motion {inverse}"
+        );
+        // The composition: the picture taken at `world_from_reference · D`, warped by an
+        // estimate `world_from_reference · Δ`, looks like the rendering's camera moved by
+        // `D Δ⁻¹`; that update composed gives the picture's pose.
+        let d = world_from_reference.inverse() * world_from_camera;
+        let delta = Isometry3::exp([0.02, 0.01, -0.03, 0.005, 0.01, -0.02]).unwrap();
+        let estimate = world_from_reference * delta;
+        let back = compose(&world_from_reference, d * delta.inverse(), &estimate);
+        let (t, r) = back.distance_to(&world_from_camera);
+        assert!(t < 1e-9 && r < 1e-9, "{t} m, {r} rad");
+    }
+}
