@@ -226,7 +226,7 @@ impl Servo<'_> {
             for iteration in 0..budget {
                 let started = Instant::now();
                 // The rendering this iteration compares with, when it is not rendered.
-                let between = match (rerender_px, &reference) {
+                let mut between = match (rerender_px, &reference) {
                     (Some((px, lambda_star)), Some(r))
                         if (lambda - r.lambda).abs() <= 0.2 * r.lambda
                             && r.image_motion_px(camera, pose) <= f64::from(px) =>
@@ -235,6 +235,21 @@ impl Servo<'_> {
                     }
                     _ => None,
                 };
+                if let Some((r, _)) = between {
+                    // The picture seen from the rendering (rendered again if it sees too
+                    // little of it).
+                    warp::warp(
+                        camera,
+                        points,
+                        &(pose.inverse() * r.world_from_reference),
+                        desired,
+                        warped,
+                    );
+                    let compared = warped.valid.iter().filter(|&&v| v).count();
+                    if (compared as f64) / valid_count < self.config.min_hit_fraction {
+                        between = None;
+                    }
+                }
                 if between.is_none() {
                     let stats = render_once(renderer, rendered_at, self.cloud, pose, frame)?;
                     let hits = stats.pixels_hit as f64;
@@ -252,15 +267,9 @@ impl Servo<'_> {
                 };
                 // Feature, residuals, rows.
                 if let Some((r, lambda_star)) = between {
-                    // The picture seen from the rendering; both transformed on their
-                    // common support, the rows (`L_G`, `J_λ`) the rendering's.
-                    warp::warp(
-                        camera,
-                        points,
-                        &(pose.inverse() * r.world_from_reference),
-                        desired,
-                        warped,
-                    );
+                    // The picture warped into the rendering and the rendering, both
+                    // transformed on their common support; the rows (`L_G`, `J_λ`) the
+                    // rendering's.
                     support.copy_from_slice(&warped.valid);
                     let compared = support.iter().filter(|&&s| s).count();
                     coverage = compared as f64 / r.observed.max(1) as f64;

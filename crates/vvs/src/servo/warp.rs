@@ -103,6 +103,10 @@ pub(crate) fn warp(
     let rotation = Mat3::from_quat(camera_from_reference.rotation.as_quat());
     let translation = camera_from_reference.translation.as_vec3();
     let (w, h) = (picture.width() as usize, picture.height() as usize);
+    if w < 2 || h < 2 {
+        out.valid.fill(false);
+        return;
+    }
     let intensity = picture.intensity();
     for ((o, valid), p) in out
         .intensity
@@ -119,13 +123,14 @@ pub(crate) fn warp(
         let Ok([u, v]) = camera.project_unbounded(q.to_array()) else {
             continue;
         };
-        // The four pixels around (u, v): pixel (i, j) is centred at (i, j).
-        let (x0, y0) = (u.floor(), v.floor());
-        if !(x0 >= 0.0 && y0 >= 0.0 && x0 + 1.0 < w as f32 && y0 + 1.0 < h as f32) {
+        // The four pixels around (u, v): pixel (i, j) is centred at (i, j) (non-negative
+        // coordinates truncate to their floor).
+        if !(u >= 0.0 && v >= 0.0 && u < (w - 1) as f32 && v < (h - 1) as f32) {
             continue;
         }
-        let (fx, fy) = (u - x0, v - y0);
-        let k = y0 as usize * w + x0 as usize;
+        let (x0, y0) = (u as usize, v as usize);
+        let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+        let k = y0 * w + x0;
         let corners = [k, k + 1, k + w, k + w + 1];
         if !corners.iter().all(|&c| picture.is_observed(c)) {
             continue;
