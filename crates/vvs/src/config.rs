@@ -171,7 +171,9 @@ pub struct VvsConfig {
     /// `converged_px` measures), or λ by more than a fifth; in between, the picture is
     /// warped into the last rendering through its ranges, both are transformed on their
     /// common support, and the step takes that rendering's `L_G` and `J_λ` (the inverse
-    /// compositional scheme: the residual exact, the Jacobian the last rendering's).
+    /// compositional scheme: the residual from the picture itself, warped bilinearly
+    /// through the rendering's ranges without occlusion; the Jacobian the last
+    /// rendering's).
     /// Brightness stages (PoVS), the paper's support and the vignetting model render
     /// at every iteration.
     pub rerender_px: Option<f32>,

@@ -105,16 +105,17 @@ pub struct Localizer {
     /// it can show); and a PGM stage renders only when the pose has moved the image by
     /// more than a pixel since its last rendering (`rerender_px = 1`: in between, the
     /// picture warped into that rendering is compared with it, with its `L_G`; a
-    /// local localisation in 0.6 of the time, the same success on the city's protocols,
+    /// prepared local localisation in 0.5–0.7 of the time, the same success on the
+    /// city's protocols,
     /// ending 1–3 mm further from the truth on renderings). On the synthetic city the
     /// paper's settings' convergence domain, in a quarter of their iterations
     /// (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`, what the speed goals are
     /// stated for); `parallel = true` spreads each rendering (in up to 8 runs) and the
     /// PGM's convolutions over rayon's threads, and a global search's nodes, descents
-    /// and refinements (on two cores a prepared localisation in about four fifths of
-    /// the time, a global search in 0.58–0.68 of it: `docs/RESULTS.md`, "Speed"), the
-    /// same bits. With a
+    /// and refinements (on two cores a global search in 0.54–0.68 of the time; a
+    /// prepared local localisation no faster since its warped iterations run on one:
+    /// `docs/RESULTS.md`, "Speed"), the same bits. With a
     /// prior box, the global search's descents pruned (`global.prune_after_iterations
     /// = 3`, `global.pruned_to = 10`: every screened candidate descends 3 iterations,
     /// the 10 best run on to 10; a search 1.96 → 1.55 s, the same success on the

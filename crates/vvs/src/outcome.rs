@@ -119,8 +119,9 @@ pub struct IterationRecord {
     pub update_rotation_rad: f64,
     /// Wall time of the iteration (render + feature + solve), seconds.
     pub time_s: f64,
-    /// Whether the iteration rendered the cloud (`false`: it compared the picture
-    /// warped into the last rendering, [`crate::VvsConfig::rerender_px`]).
+    /// Whether the iteration compared with a rendering at its own pose (rendered, or
+    /// the frame already rendered there; `false`: it compared the picture warped into
+    /// the last rendering, [`crate::VvsConfig::rerender_px`]).
     #[serde(default = "rendered_by_default")]
     pub rendered: bool,
 }

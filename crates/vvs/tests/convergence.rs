@@ -487,3 +487,43 @@ fn rendering_only_when_the_image_moves_ends_at_the_same_place_with_fewer_renderi
     assert!(ta < 0.01 && tb < 0.01, "{ta} m, {tb} m");
     assert!(3 * rendered(&b) <= 2 * rendered(&a));
 }
+
+/// `rerender_px` is for PGM stages on the common support: PoVS, and Rule2 on the
+/// paper's support, render at every iteration with it as without it (the same bits).
+#[test]
+fn rendering_only_when_the_image_moves_leaves_povs_and_the_paper_support_alone() {
+    let camera = fixture();
+    let start = offset([0.02, -0.02, 0.01, 0.005, -0.005, 0.01]);
+    for (method, support) in [
+        (Method::Povs, vvs::Support::Common),
+        (Method::Rule2, vvs::Support::Region),
+    ] {
+        let config = VvsConfig {
+            support,
+            keep_history: true,
+            parallel: false,
+            max_iterations: 40,
+            step1_max_iterations: 20,
+            ..VvsConfig::default()
+        };
+        let mut servo = Servo::new(&city().cloud, &camera, config.clone()).unwrap();
+        let desired = servo.render(&desired_pose()).unwrap();
+        let every = servo.run(method, &desired, start).unwrap();
+        let warped = Servo::new(
+            &city().cloud,
+            &camera,
+            VvsConfig {
+                rerender_px: Some(1.0),
+                ..config
+            },
+        )
+        .unwrap()
+        .run(method, &desired, start)
+        .unwrap();
+        assert!(warped.history.iter().all(|r| r.rendered), "{method:?}");
+        assert_eq!(
+            every.world_from_camera, warped.world_from_camera,
+            "{method:?}"
+        );
+    }
+}

@@ -7,10 +7,13 @@
 //! of its camera frame (`d_k` the pixel's ray, `ρ_k` its range). A camera at
 //! `world_from_camera` sees that point at `π(camera_from_reference X_k)`: the picture
 //! sampled there (bilinearly) is what the picture shows at pixel `k` of the rendering
-//! if the pose is right. Moving the rendering's camera by `v` warps the rendering like
-//! a camera moved by `−v`, so the law's `v` (from the rendering's `L_G`, computed once)
-//! updates the pose as `world_from_reference · exp(v) · reference_from_camera`
-//! ([`compose`]).
+//! if the pose is right. With the estimate at `world_from_reference · Δ` and the picture
+//! taken at `world_from_reference · D`, the warped picture looks like the rendering's
+//! camera moved by `D Δ⁻¹`; the law's `v` (from the rendering's `L_G`, computed once)
+//! estimates that motion, so the pose becomes `world_from_reference · exp(v) · Δ`
+//! ([`compose`]). Approximations: the surface is taken at the rendering's ranges (no
+//! occlusion), the picture is interpolated bilinearly, and the Jacobian is the last
+//! rendering's (its normalisation over that rendering's support too).
 
 use frame::{AnyImage, Frame, Image, PixelStatus};
 use glam::{Mat3, Vec3};
@@ -92,7 +95,8 @@ pub(crate) fn mean_inverse_range(frame: &Frame) -> f64 {
 
 /// `picture` seen from the rendering whose points are `points`: pixel `k` of `out`
 /// takes the picture bilinearly at `π(camera_from_reference X_k)`, valid where `X_k` is
-/// known, projects inside the picture and its four neighbours hold an intensity.
+/// known, projects inside the picture and its four neighbours lie in the camera's valid
+/// region and hold an intensity.
 pub(crate) fn warp(
     camera: &Camera,
     points: &[[f32; 3]],
@@ -108,6 +112,7 @@ pub(crate) fn warp(
         return;
     }
     let intensity = picture.intensity();
+    let region = camera.valid_pixels();
     for ((o, valid), p) in out
         .intensity
         .iter_mut()
@@ -132,7 +137,7 @@ pub(crate) fn warp(
         let (fx, fy) = (u - x0 as f32, v - y0 as f32);
         let k = y0 * w + x0;
         let corners = [k, k + 1, k + w, k + w + 1];
-        if !corners.iter().all(|&c| picture.is_observed(c)) {
+        if !corners.iter().all(|&c| region[c] && picture.is_observed(c)) {
             continue;
         }
         let [a, b, c, d] = corners.map(|c| intensity[c]);
