@@ -235,9 +235,13 @@ impl Servo<'_> {
                     }
                     _ => None,
                 };
-                if let Some((r, _)) = between {
+                if let (Some((r, _)), Some(kept)) = (between, reference.as_mut()) {
                     // The picture seen from the rendering (rendered again if it sees too
                     // little of it).
+                    if !kept.lifted {
+                        warp::lift(camera, frame, points);
+                        kept.lifted = true;
+                    }
                     warp::warp(
                         camera,
                         points,
@@ -338,12 +342,12 @@ impl Servo<'_> {
                         }
                     }
                     if rerender_px.is_some() {
-                        warp::lift(camera, frame, points);
                         reference = Some(Reference {
                             world_from_reference: *pose,
                             lambda,
-                            mean_inverse_range: warp::mean_inverse_range(frame),
+                            mean_inverse_range: mean_inverse_range(frame),
                             observed,
+                            lifted: false,
                         });
                     }
                 } else {
@@ -581,10 +585,36 @@ fn converged_in_pixels(
 }
 
 /// How far an update of `translation_m` and `rotation_rad` moves the image of what
-/// `frame` sees, in pixels of `camera`: `α (‖t‖ / ρ̄ + ‖ω‖)`, `α` the larger focal
-/// length, `1/ρ̄` the mean inverse range of the frame's hits with a positive range
-/// (infinite without any: a translation's effect is then unknown).
+/// `frame` sees, in pixels of `camera` ([`motion_px`] at `frame`'s
+/// [`mean_inverse_range`]).
 fn image_motion_px(camera: &Camera, frame: &Frame, translation_m: f64, rotation_rad: f64) -> f64 {
+    motion_px(
+        camera,
+        mean_inverse_range(frame),
+        translation_m,
+        rotation_rad,
+    )
+}
+
+/// `α (‖t‖ / ρ̄ + ‖ω‖)`: how far a motion of `translation_m` and `rotation_rad` moves
+/// the image of points at mean inverse range `1/ρ̄`, in pixels of `camera` (`α` its
+/// larger focal length); infinite when `1/ρ̄` is (a translation's effect unknown).
+pub(crate) fn motion_px(
+    camera: &Camera,
+    mean_inverse_range: f64,
+    translation_m: f64,
+    rotation_rad: f64,
+) -> f64 {
+    if mean_inverse_range.is_infinite() {
+        return f64::INFINITY;
+    }
+    let i = camera.intrinsics();
+    i.alpha_u.max(i.alpha_v) * (translation_m * mean_inverse_range + rotation_rad)
+}
+
+/// The mean inverse range of `frame`'s hits with a positive range (m⁻¹; infinite
+/// without any).
+pub(crate) fn mean_inverse_range(frame: &Frame) -> f64 {
     let (mut inverse_sum, mut hits) = (0.0f64, 0usize);
     for (&range_m, &status) in frame.range_m.iter().zip(&frame.status) {
         if status == PixelStatus::Hit && range_m > 0.0 {
@@ -593,11 +623,10 @@ fn image_motion_px(camera: &Camera, frame: &Frame, translation_m: f64, rotation_
         }
     }
     if hits == 0 {
-        return f64::INFINITY;
+        f64::INFINITY
+    } else {
+        inverse_sum / hits as f64
     }
-    let mean_inverse_range = inverse_sum / hits as f64;
-    let i = camera.intrinsics();
-    i.alpha_u.max(i.alpha_v) * (translation_m * mean_inverse_range + rotation_rad)
 }
 
 /// Whether `position` lies outside the box `bounds` (lowest, highest corner) enlarged by

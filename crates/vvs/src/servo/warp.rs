@@ -19,6 +19,8 @@ use frame::{AnyImage, Frame, Image, PixelStatus};
 use glam::{Mat3, Vec3};
 use ucm::{Camera, Isometry3};
 
+use super::stage::motion_px;
+
 /// What an iteration between renderings compares against: the rendering's pose, λ
 /// and the scale of its image motion, fixed when it was rendered.
 #[derive(Clone, Copy, Debug)]
@@ -31,6 +33,9 @@ pub(crate) struct Reference {
     pub(crate) mean_inverse_range: f64,
     /// How many pixels of the picture hold an intensity (the coverage's denominator).
     pub(crate) observed: usize,
+    /// Whether the level's points hold the rendering's ([`lift`]: done by the first
+    /// iteration that warps, as most renderings are followed by another).
+    pub(crate) lifted: bool,
 }
 
 impl Reference {
@@ -39,10 +44,9 @@ impl Reference {
     pub(crate) fn image_motion_px(&self, camera: &Camera, world_from_camera: &Isometry3) -> f64 {
         let [tx, ty, tz, wx, wy, wz] =
             (self.world_from_reference.inverse() * *world_from_camera).log();
-        let i = camera.intrinsics();
         let t = (tx * tx + ty * ty + tz * tz).sqrt();
         let w = (wx * wx + wy * wy + wz * wz).sqrt();
-        i.alpha_u.max(i.alpha_v) * (t * self.mean_inverse_range + w)
+        motion_px(camera, self.mean_inverse_range, t, w)
     }
 }
 
@@ -73,23 +77,6 @@ pub(crate) fn lift(camera: &Camera, frame: &Frame, points: &mut [[f32; 3]]) {
         if let Ok(d) = camera.unproject([(k % w) as f32, (k / w) as f32]) {
             *p = d.map(|c| c * range_m);
         }
-    }
-}
-
-/// The mean inverse range of `frame`'s hits with a positive range (m⁻¹; infinite
-/// without any, so that a translation's effect is unknown).
-pub(crate) fn mean_inverse_range(frame: &Frame) -> f64 {
-    let (mut inverse_sum, mut hits) = (0.0f64, 0usize);
-    for (&range_m, &status) in frame.range_m.iter().zip(&frame.status) {
-        if status == PixelStatus::Hit && range_m > 0.0 {
-            inverse_sum += 1.0 / f64::from(range_m);
-            hits += 1;
-        }
-    }
-    if hits == 0 {
-        f64::INFINITY
-    } else {
-        inverse_sum / hits as f64
     }
 }
 
