@@ -177,6 +177,12 @@ pub struct VvsConfig {
     /// Brightness stages (PoVS), the paper's support and the vignetting model render
     /// at every iteration.
     pub rerender_px: Option<f32>,
+    /// With `rerender_px`: a method's last stage (step 2) ends on a rendered iteration. A
+    /// stop met on a warped iteration (a step or a stall measured against the warp's
+    /// approximation) renders at the next iteration, where the stop is tested again:
+    /// the outcome's cost and last step compare the picture with a rendering at its
+    /// pose. It costs about one rendering per localisation.
+    pub end_on_rendering: bool,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
     pub divergence_cost_factor: f64,
     /// Divergence: fewer than this fraction of the valid pixels see a point.
@@ -252,6 +258,7 @@ impl Default for VvsConfig {
             stall_relative_decrease: 0.01,
             converged_px: None,
             rerender_px: None,
+            end_on_rendering: true,
             divergence_cost_factor: 1e3,
             min_hit_fraction: 0.02,
             bounds_margin_m: 5.0,

@@ -192,6 +192,12 @@ impl Servo<'_> {
             *warped = Image::new(camera.width(), camera.height());
         }
         let mut reference: Option<Reference> = None;
+        // A method's last stage ends on a rendered iteration: a stop met on a warped one
+        // (its cost and step the warp's) renders at the next iteration, where the stop is
+        // tested again.
+        let end_rendered =
+            rerender_px.is_some() && self.config.end_on_rendering && stage_number == 2;
+        let mut must_render = false;
         // The desired feature, fixed for the stage (on the common support: taken again
         // at every iteration).
         let (mut lambda, optimise_lambda) = match stage {
@@ -228,7 +234,8 @@ impl Servo<'_> {
                 // The rendering this iteration compares with, when it is not rendered.
                 let mut between = match (rerender_px, &reference) {
                     (Some((px, lambda_star)), Some(r))
-                        if (lambda - r.lambda).abs() <= 0.2 * r.lambda
+                        if !must_render
+                            && (lambda - r.lambda).abs() <= 0.2 * r.lambda
                             && r.image_motion_px(camera, pose) <= f64::from(px) =>
                     {
                         Some((*r, lambda_star))
@@ -421,12 +428,18 @@ impl Servo<'_> {
                     break 'stage (StopReason::Diverged(Divergence::CostExploded), iteration);
                 }
                 self.costs.push(cost);
+                // Whether a stop met here is put off to a rendered iteration.
+                let put_off = end_rendered && between.is_some();
+                must_render = false;
                 if stalled(
                     &self.costs,
                     stall_window,
                     self.config.stall_relative_decrease,
                 ) {
-                    break 'stage (StopReason::Stalled, iteration);
+                    if !put_off {
+                        break 'stage (StopReason::Stalled, iteration);
+                    }
+                    must_render = true;
                 }
                 // The update: x = −μ J⁺ e.
                 let eta = self.config.levenberg_marquardt;
@@ -528,16 +541,17 @@ impl Servo<'_> {
                 if outside(self.bounds, self.config.bounds_margin_m, position) {
                     break 'stage (StopReason::Diverged(Divergence::LeftBounds), iteration + 1);
                 }
-                if update_t < self.config.converged_translation_m
+                let converged = (update_t < self.config.converged_translation_m
                     && update_r < self.config.converged_rotation_rad
-                    && lambda_dot.abs() < 1e-4
-                {
-                    break 'stage (StopReason::Converged, iteration + 1);
-                }
-                if let Some(px) = converged_px
-                    && converged_in_pixels(px, lambda_dot, camera, frame, update_t, update_r)
-                {
-                    break 'stage (StopReason::Converged, iteration + 1);
+                    && lambda_dot.abs() < 1e-4)
+                    || converged_px.is_some_and(|px| {
+                        converged_in_pixels(px, lambda_dot, camera, frame, update_t, update_r)
+                    });
+                if converged {
+                    if !put_off {
+                        break 'stage (StopReason::Converged, iteration + 1);
+                    }
+                    must_render = true;
                 }
             }
             (StopReason::IterationBudget, budget)
