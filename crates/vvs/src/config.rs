@@ -167,8 +167,10 @@ pub struct VvsConfig {
     pub converged_px: Option<f32>,
     /// Beyond the paper (`None`: off, every iteration renders): a PGM stage on the
     /// common support renders only when the pose has moved the image by more than this
-    /// many pixels of its level since the last rendering (`α (‖t‖ / ρ̄ + ‖ω‖)`, as
-    /// `converged_px` measures), or λ by more than a fifth; in between, the picture is
+    /// many pixels of its level per pixel of λ (at least 1) since the last rendering
+    /// (`α (‖t‖ / ρ̄ + ‖ω‖)`, as `converged_px` measures: a PGM of extent λ pixels
+    /// changes little, and its `L_G` holds, over a motion of λ pixels), or λ by more
+    /// than a fifth; in between, the picture is
     /// warped into the last rendering through its ranges, both are transformed on their
     /// common support, and the step takes that rendering's `L_G` and `J_λ` (the inverse
     /// compositional scheme: the residual from the picture itself, warped bilinearly
@@ -181,7 +183,10 @@ pub struct VvsConfig {
     /// stop met on a warped iteration (a step or a stall measured against the warp's
     /// approximation) renders at the next iteration, where the stop is tested again:
     /// the outcome's cost and last step compare the picture with a rendering at its
-    /// pose. It costs about one rendering per localisation.
+    /// pose. It costs about one rendering per localisation (a third more time for the
+    /// localiser, half more per tracked frame) and moves the end by about 0.05 pixel:
+    /// 1 mm instead of 3 mm from the truth on renderings, the same on photographs
+    /// (`docs/RESULTS.md`, "Speed"). Off by default.
     pub end_on_rendering: bool,
     /// Divergence: the cost exceeds this multiple of the stage's initial cost.
     pub divergence_cost_factor: f64,
@@ -258,7 +263,7 @@ impl Default for VvsConfig {
             stall_relative_decrease: 0.01,
             converged_px: None,
             rerender_px: None,
-            end_on_rendering: true,
+            end_on_rendering: false,
             divergence_cost_factor: 1e3,
             min_hit_fraction: 0.02,
             bounds_margin_m: 5.0,

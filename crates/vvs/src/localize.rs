@@ -103,11 +103,11 @@ pub struct Localizer {
     /// stage's level (`converged_px`: a street seen from metres away, or a picture at
     /// half the resolution, settles below 0.5 mm only after steps that change nothing
     /// it can show); and a PGM stage renders only when the pose has moved the image by
-    /// more than a pixel since its last rendering (`rerender_px = 1`: in between, the
-    /// picture warped into that rendering is compared with it, with its `L_G`; a
-    /// prepared local localisation in 0.5–0.7 of the time, the same success on the
-    /// city's protocols,
-    /// ending 1–3 mm further from the truth on renderings). On the synthetic city the
+    /// more than λ pixels (at least one) since its last rendering (`rerender_px = 1`: in
+    /// between, the picture warped into that rendering is compared with it, with its
+    /// `L_G`; a prepared local localisation in about 0.4 of the time, the same
+    /// success on the city's protocols, ending 1–3 mm further from the truth on
+    /// renderings, where `end_on_rendering` brings it back). On the synthetic city the
     /// paper's settings' convergence domain, in a quarter of their iterations
     /// (`docs/RESULTS.md`, "Real pictures" and "Speed"). No
     /// per-iteration history. One thread (`parallel = false`, what the speed goals are

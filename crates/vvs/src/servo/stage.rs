@@ -236,7 +236,8 @@ impl Servo<'_> {
                     (Some((px, lambda_star)), Some(r))
                         if !must_render
                             && (lambda - r.lambda).abs() <= 0.2 * r.lambda
-                            && r.image_motion_px(camera, pose) <= f64::from(px) =>
+                            && r.image_motion_px(camera, pose)
+                                <= f64::from(px) * f64::from(r.lambda).max(1.0) =>
                     {
                         Some((*r, lambda_star))
                     }
