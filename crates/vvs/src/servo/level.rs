@@ -31,9 +31,11 @@ pub(crate) struct Level {
     /// The desired picture as compared, at every pixel it observes, and those pixels.
     pub(crate) against: Vec<f32>,
     pub(crate) against_observed: Vec<bool>,
-    /// With [`VvsConfig::rerender_px`]: the points the last rendering's hits see
-    /// ([`crate::servo::warp::lift`]), and the picture warped into it (empty
-    /// without).
+    /// With [`VvsConfig::rerender_px`]: every pixel's ray (computed by the first
+    /// iteration that warps, [`crate::servo::warp::rays`]), the points the last
+    /// rendering's hits see ([`crate::servo::warp::lift`]), and the picture warped into
+    /// it (empty without).
+    pub(crate) rays: Vec<[f32; 3]>,
     pub(crate) points: Vec<[f32; 3]>,
     pub(crate) warped: Image,
 }
@@ -98,6 +100,7 @@ impl Level {
             support: vec![false; camera.pixel_count()],
             against: vec![0.0; camera.pixel_count()],
             against_observed: vec![false; camera.pixel_count()],
+            rays: Vec::new(),
             points: if config.rerender_px.is_some() {
                 vec![[f32::NAN; 3]; camera.pixel_count()]
             } else {

@@ -31,11 +31,11 @@ const UNIFORM_INTENSITY_RANGE: f32 = 1.0 / (255.0 * 16.0);
 pub const MAX_SERVO_PIXELS: u64 = 1 << 22;
 
 /// Set-up memory of [`Servo`] per camera pixel, bytes (measured: a 4096 × 4096 camera
-/// took 3.7 GB, one thread, before the 21–23 bytes a pixel of
+/// took 3.7 GB, one thread, before the 37–39 bytes a pixel of
 /// [`VvsConfig::rerender_px`]'s buffers over two or three pyramid levels; with `VvsConfig::parallel` each renderer also holds about 20
 /// bytes a pixel for each more thread of the pool, up to 7, and a global search a
 /// servo of its own for each thread, up to 8 and 1 GB together).
-pub const SERVO_BYTES_PER_PIXEL: u64 = 245;
+pub const SERVO_BYTES_PER_PIXEL: u64 = 260;
 
 /// The optimiser for one cloud and camera, owning every buffer (no allocation per
 /// iteration once warm).

@@ -174,6 +174,7 @@ impl Servo<'_> {
             support,
             against,
             against_observed,
+            rays,
             points,
             warped,
         } = &mut self.levels[level];
@@ -247,7 +248,10 @@ impl Servo<'_> {
                     // The picture seen from the rendering (rendered again if it sees too
                     // little of it).
                     if !kept.lifted {
-                        warp::lift(camera, frame, points);
+                        if rays.len() != camera.pixel_count() {
+                            warp::rays(camera, rays);
+                        }
+                        warp::lift(frame, rays, points);
                         kept.lifted = true;
                     }
                     warp::warp(
@@ -424,8 +428,8 @@ impl Servo<'_> {
                 if !cost.is_finite() {
                     break 'stage (StopReason::Diverged(Divergence::NotFinite), iteration);
                 }
-                let reference = *initial_cost.get_or_insert(cost);
-                if cost > self.config.divergence_cost_factor * reference.max(1e-30) {
+                let initial = *initial_cost.get_or_insert(cost);
+                if cost > self.config.divergence_cost_factor * initial.max(1e-30) {
                     break 'stage (StopReason::Diverged(Divergence::CostExploded), iteration);
                 }
                 self.costs.push(cost);
@@ -546,7 +550,20 @@ impl Servo<'_> {
                     && update_r < self.config.converged_rotation_rad
                     && lambda_dot.abs() < 1e-4)
                     || converged_px.is_some_and(|px| {
-                        converged_in_pixels(px, lambda_dot, camera, frame, update_t, update_r)
+                        // The rendering's mean inverse range: the reference's when there
+                        // is one (`frame` is its rendering).
+                        let inverse_range = || match (&rerender_px, &reference) {
+                            (Some(_), Some(r)) => r.mean_inverse_range,
+                            _ => mean_inverse_range(frame),
+                        };
+                        converged_in_pixels(
+                            px,
+                            lambda_dot,
+                            camera,
+                            inverse_range,
+                            update_t,
+                            update_r,
+                        )
                     });
                 if converged {
                     if !put_off {
@@ -582,12 +599,13 @@ fn compute_feature(
 }
 
 /// `VvsConfig::converged_px`'s test: an update changes λ by less than `px` pixels and
-/// moves the image of what `frame` sees by less than `px` ([`image_motion_px`]).
+/// moves the image of the rendering by less than `px` ([`motion_px`] at its
+/// `mean_inverse_range`, read only when the rotation alone passes).
 fn converged_in_pixels(
     px: f32,
     lambda_dot: f32,
     camera: &Camera,
-    frame: &Frame,
+    mean_inverse_range: impl FnOnce() -> f64,
     translation_m: f64,
     rotation_rad: f64,
 ) -> bool {
@@ -596,12 +614,13 @@ fn converged_in_pixels(
     // the frame's ranges need not be read.
     lambda_dot.abs() < px
         && i.alpha_u.max(i.alpha_v) * rotation_rad < f64::from(px)
-        && image_motion_px(camera, frame, translation_m, rotation_rad) < f64::from(px)
+        && motion_px(camera, mean_inverse_range(), translation_m, rotation_rad) < f64::from(px)
 }
 
 /// How far an update of `translation_m` and `rotation_rad` moves the image of what
 /// `frame` sees, in pixels of `camera` ([`motion_px`] at `frame`'s
 /// [`mean_inverse_range`]).
+#[cfg(test)]
 fn image_motion_px(camera: &Camera, frame: &Frame, translation_m: f64, rotation_rad: f64) -> f64 {
     motion_px(
         camera,
@@ -702,7 +721,14 @@ mod tests {
         frame.status.fill(PixelStatus::Sky);
         // No hit: any motion may be large, the test never passes.
         assert_eq!(image_motion_px(&camera, &frame, 0.0, 0.0), f64::INFINITY);
-        assert!(!converged_in_pixels(1.0, 0.0, &camera, &frame, 0.0, 0.0));
+        assert!(!converged_in_pixels(
+            1.0,
+            0.0,
+            &camera,
+            || mean_inverse_range(&frame),
+            0.0,
+            0.0
+        ));
         // Hits at 1 m and 4 m: a mean inverse range of 0.625 /m; a masked pixel's
         // range, and a hit's without a positive range, are not read.
         frame.status[0] = PixelStatus::Hit;
@@ -722,7 +748,7 @@ mod tests {
             px as f32 * 1.01,
             0.0,
             &camera,
-            &frame,
+            || mean_inverse_range(&frame),
             0.02,
             0.001
         ));
@@ -730,25 +756,37 @@ mod tests {
             px as f32 * 0.99,
             0.0,
             &camera,
-            &frame,
+            || mean_inverse_range(&frame),
             0.02,
             0.001
         ));
         let wide = px as f32 * 1.01;
         assert!(!converged_in_pixels(
-            wide, -wide, &camera, &frame, 0.02, 0.001
+            wide,
+            -wide,
+            &camera,
+            || mean_inverse_range(&frame),
+            0.02,
+            0.001
         ));
         assert!(converged_in_pixels(
             wide,
             -0.99 * wide,
             &camera,
-            &frame,
+            || mean_inverse_range(&frame),
             0.02,
             0.001
         ));
         // A rotation alone moving the image by more fails whatever the ranges.
         let turn = f64::from(wide) / alpha * 1.01;
-        assert!(!converged_in_pixels(wide, 0.0, &camera, &frame, 0.0, turn));
+        assert!(!converged_in_pixels(
+            wide,
+            0.0,
+            &camera,
+            || mean_inverse_range(&frame),
+            0.0,
+            turn
+        ));
         let half = camera.downsampled(2).unwrap();
         let mut small = Frame::for_camera(&half);
         small.status.fill(PixelStatus::Sky);

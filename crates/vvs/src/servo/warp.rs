@@ -60,23 +60,32 @@ pub(crate) fn compose(
     *world_from_reference * update * (world_from_reference.inverse() * *world_from_camera)
 }
 
-/// Each hit of `frame` as the point of its camera frame it sees (`ρ d`, metres), NaN
-/// where `frame` sees no point or its range is unknown.
-pub(crate) fn lift(camera: &Camera, frame: &Frame, points: &mut [[f32; 3]]) {
+/// Every pixel's ray (the unit vector of the camera frame it sees along), NaN where the
+/// model has none: what [`lift`] scales, computed once for a level.
+pub(crate) fn rays(camera: &Camera, rays: &mut Vec<[f32; 3]>) {
     let w = camera.width() as usize;
-    for (k, ((p, &status), &range_m)) in points
+    rays.clear();
+    rays.extend((0..camera.pixel_count()).map(|k| {
+        camera
+            .unproject([(k % w) as f32, (k / w) as f32])
+            .unwrap_or([f32::NAN; 3])
+    }));
+}
+
+/// Each hit of `frame` as the point of its camera frame it sees (`ρ d`, metres, `d` its
+/// pixel's ray of [`rays`]), NaN where `frame` sees no point or its range is unknown.
+pub(crate) fn lift(frame: &Frame, rays: &[[f32; 3]], points: &mut [[f32; 3]]) {
+    for (((p, &status), &range_m), d) in points
         .iter_mut()
         .zip(&frame.status)
         .zip(&frame.range_m)
-        .enumerate()
+        .zip(rays)
     {
-        *p = [f32::NAN; 3];
-        if status != PixelStatus::Hit || !(range_m > 0.0 && range_m.is_finite()) {
-            continue;
-        }
-        if let Ok(d) = camera.unproject([(k % w) as f32, (k / w) as f32]) {
-            *p = d.map(|c| c * range_m);
-        }
+        *p = if status == PixelStatus::Hit && range_m > 0.0 && range_m.is_finite() {
+            d.map(|c| c * range_m)
+        } else {
+            [f32::NAN; 3]
+        };
     }
 }
 
@@ -168,8 +177,9 @@ mod tests {
         renderer
             .render(&cloud, &pose.inverse(), &mut frame)
             .unwrap();
-        let mut points = vec![[0.0; 3]; camera.pixel_count()];
-        lift(&camera, &frame, &mut points);
+        let (mut rays_of_pixels, mut points) = (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
+        rays(&camera, &mut rays_of_pixels);
+        lift(&frame, &rays_of_pixels, &mut points);
         let picture = Image::from_frame(&frame);
         let mut out = Image::new(camera.width(), camera.height());
         warp(&camera, &points, &Isometry3::IDENTITY, &picture, &mut out);
@@ -209,8 +219,9 @@ mod tests {
             .render(&cloud, &world_from_camera.inverse(), &mut frame)
             .unwrap();
         let picture = Image::from_frame(&frame);
-        let mut points = vec![[0.0; 3]; camera.pixel_count()];
-        lift(&camera, &reference, &mut points);
+        let (mut rays_of_pixels, mut points) = (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
+        rays(&camera, &mut rays_of_pixels);
+        lift(&reference, &rays_of_pixels, &mut points);
         let mut out = Image::new(camera.width(), camera.height());
         let mean_difference = |out: &Image| {
             let (mut sum, mut n) = (0.0f64, 0usize);
