@@ -369,7 +369,7 @@ fn the_tracker_defaults_follow_as_closely_in_fewer_iterations() {
         "{tracker_m} against {localizer_m} m"
     );
     assert!(
-        5 * tracker_iterations <= 4 * localizer_iterations,
+        4 * tracker_iterations <= 3 * localizer_iterations,
         "{tracker_iterations} against {localizer_iterations} iterations"
     );
 }

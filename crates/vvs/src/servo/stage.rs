@@ -433,8 +433,9 @@ impl Servo<'_> {
                     break 'stage (StopReason::Diverged(Divergence::CostExploded), iteration);
                 }
                 self.costs.push(cost);
-                // Whether a stop met here is put off to a rendered iteration.
-                let put_off = end_rendered && between.is_some();
+                // Whether a stop met here is put off to a rendered iteration (not at the
+                // budget's last iteration: the stop is then met as it is).
+                let put_off = end_rendered && between.is_some() && iteration + 1 < budget;
                 must_render = false;
                 if stalled(
                     &self.costs,
