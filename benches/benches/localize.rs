@@ -150,13 +150,16 @@ fn goal_pgmot_frame(c: &mut Criterion) {
     // A frame of a running track: a tracker that has aligned the frame before (its
     // buffers in use, its estimate there), timed on the next; each routine returns its
     // tracker, so that freeing its buffers is not timed (a track keeps them).
-    let tracker_on = |parallel| {
+    let new_tracker = |parallel| {
         let config = VvsConfig {
             parallel,
             ..Tracker::default_config()
         };
         let servo = Servo::new(&city.cloud, &camera, config).unwrap();
-        let mut tracker = Tracker::new(servo, Method::Rule2, previous).unwrap();
+        Tracker::new(servo, Method::Rule2, previous).unwrap()
+    };
+    let tracker_on = |parallel| {
+        let mut tracker = new_tracker(parallel);
         tracker.align(&picture_before).unwrap();
         tracker
     };
@@ -180,14 +183,7 @@ fn goal_pgmot_frame(c: &mut Criterion) {
     // The first frame of a track: its buffers touched for the first time.
     group.bench_function("tracker_rule2_first_frame/640", |b| {
         b.iter_batched(
-            || {
-                let config = VvsConfig {
-                    parallel: false,
-                    ..Tracker::default_config()
-                };
-                let servo = Servo::new(&city.cloud, &camera, config).unwrap();
-                Tracker::new(servo, Method::Rule2, previous).unwrap()
-            },
+            || new_tracker(false),
             |mut tracker| {
                 let outcome = tracker.align(&picture).unwrap();
                 (tracker, outcome)

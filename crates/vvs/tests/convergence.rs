@@ -484,6 +484,16 @@ fn rendering_only_when_the_image_moves_ends_at_the_same_place_with_fewer_renderi
         2.0 * apart_c < apart_b,
         "{apart_c} against {apart_b} m apart"
     );
+    // Step 1's stages (λ* = 15, 7.5, 3 at half the resolution) render about once each:
+    // the threshold grows with λ (with one pixel whatever λ, the bench's localisation
+    // from this offset rendered at 9 of its 12 iterations).
+    let step1_rendered = b
+        .history
+        .iter()
+        .filter(|r| r.rendered && r.stage == 1)
+        .count();
+    eprintln!("step 1: {step1_rendered} renderings");
+    assert!(step1_rendered <= 4, "{step1_rendered} renderings in step 1");
     for o in [&b, &c] {
         assert!(
             3 * rendered(o) <= 2 * rendered(&a),
