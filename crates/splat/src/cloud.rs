@@ -414,6 +414,49 @@ impl PointCloud {
     pub fn bounds(&self) -> (DVec3, DVec3) {
         self.bounds
     }
+
+    /// A copy with one point in `keep_one_in` of each cell (its first `⌈len / k⌉`, a
+    /// uniform random sample of it), laid out again in cells of `cell_size_m`, its
+    /// spacing `√k` times this one's: what a low-resolution camera needs of the cloud
+    /// (its renderings draw as many points a pixel, from fewer and larger cells, the
+    /// level of detail's per-cell work being most of a small image's time). Positions
+    /// are rounded to the new cells' steps; colours follow their points.
+    ///
+    /// Errors: `keep_one_in` 0, or a cell size below [`MIN_CELL_SIZE_M`] or not finite.
+    pub fn thinned(&self, keep_one_in: u32, cell_size_m: f32) -> Result<Self, SplatError> {
+        if keep_one_in == 0 {
+            return Err(SplatError::Parameter {
+                name: "keep_one_in",
+                message: "must be >= 1, got 0".into(),
+            });
+        }
+        let kept = |cell: &Cell| {
+            let start = cell.start as usize;
+            start..start + cell.len.div_ceil(keep_one_in) as usize
+        };
+        let count: usize = self.cells.iter().map(|c| kept(c).len()).sum();
+        let (mut positions, mut intensities) =
+            (Vec::with_capacity(count), Vec::with_capacity(count));
+        let mut colors = self.colors.as_ref().map(|_| Vec::with_capacity(count));
+        for cell in &self.cells {
+            for i in kept(cell) {
+                let (p, intensity) = self.decode(cell, &self.points[i]);
+                positions.push(self.origin + p);
+                intensities.push(intensity);
+                if let (Some(out), Some(all)) = (colors.as_mut(), self.colors.as_ref()) {
+                    out.push(all[i]);
+                }
+            }
+        }
+        Self::build(
+            self.origin,
+            &positions,
+            &intensities,
+            colors,
+            Some(self.spacing_m * (keep_one_in as f32).sqrt()),
+            cell_size_m,
+        )
+    }
 }
 
 /// An intensity in `[0, 1]` (clamped) in 16-bit fixed point, rounded as the renderer

@@ -89,3 +89,73 @@ fn the_generators_values_by_index_are_its_sequence() {
         }
     }
 }
+
+/// A thinned cloud keeps each cell's first `⌈len / k⌉` points, where they were (to half
+/// a step of either layout), with their intensities and colours, in cells of the new
+/// size, spaced `√k` times wider (one in one, in the same cells: every point, in the
+/// same cells, shuffled again).
+/// Keeping none, or cells of no size, is refused.
+#[test]
+fn a_thinned_cloud_keeps_each_cells_first_points() {
+    let mut rng = splat::rng::SplitMix64::new(5);
+    let n = 30_000;
+    let positions: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(rng.unit() * 40.0, rng.unit() * 12.0, rng.unit() * 6.0))
+        .collect();
+    let intensities: Vec<f32> = (0..n).map(|_| rng.unit() as f32).collect();
+    let colors: Vec<[u8; 3]> = (0..n).map(|i| [i as u8, (i >> 8) as u8, 7]).collect();
+    let origin = DVec3::new(-1.0, -2.0, 0.0);
+    let cloud = PointCloud::build(
+        origin,
+        &positions,
+        &intensities,
+        Some(colors),
+        Some(0.05),
+        2.0,
+    )
+    .unwrap();
+    let same = cloud.thinned(1, 2.0).unwrap();
+    assert_eq!(
+        (same.len(), same.cells().len()),
+        (cloud.len(), cloud.cells().len())
+    );
+    assert_eq!(same.spacing_m(), cloud.spacing_m());
+
+    let thinned = cloud.thinned(8, 4.0).unwrap();
+    let expected: Vec<usize> = cloud
+        .cells()
+        .iter()
+        .flat_map(|c| c.start as usize..(c.start + c.len.div_ceil(8)) as usize)
+        .collect();
+    assert_eq!(thinned.len(), expected.len());
+    assert!((thinned.spacing_m() - 0.05 * 8f32.sqrt()).abs() < 1e-6);
+    assert!((thinned.step_m() - 4.0 / 65_535.0).abs() < 1e-15);
+    assert!(thinned.cells().len() < cloud.cells().len());
+    // Every kept point once, at its place (to the two layouts' half steps), with its
+    // intensity.
+    let tolerance = cloud.step_m() * 0.5 + thinned.step_m() * 0.5 + 1e-9;
+    let mut wanted: Vec<_> = expected
+        .iter()
+        .map(|&i| {
+            let (p, v) = cloud.point(i).unwrap();
+            (p, v, cloud.colors().unwrap()[i])
+        })
+        .collect();
+    let mut got: Vec<_> = (0..thinned.len())
+        .map(|i| {
+            let (p, v) = thinned.point(i).unwrap();
+            (p, v, thinned.colors().unwrap()[i])
+        })
+        .collect();
+    // Each point's colour tells it apart (its index in the input, in two bytes).
+    wanted.sort_by_key(|w| w.2);
+    got.sort_by_key(|g| g.2);
+    for (w, g) in wanted.iter().zip(&got) {
+        assert!((w.0 - g.0).abs().max_element() <= tolerance, "{w:?} {g:?}");
+        assert_eq!((w.1.to_bits(), w.2), (g.1.to_bits(), g.2));
+    }
+
+    assert!(cloud.thinned(0, 2.0).is_err());
+    assert!(cloud.thinned(2, 0.0).is_err());
+    assert!(cloud.thinned(2, f32::NAN).is_err());
+}

@@ -123,7 +123,10 @@ pub struct Localizer {
     /// and up to 3 descents refined when their ranks are within 25 % of the best's
     /// (`global.refined = 3`: on a photograph two basins may rank alike at low
     /// resolution, "Real pictures"), each refinement's stages run to the full stall
-    /// window (not `intermediate_stall_window`: a descent may end a grid spacing away).
+    /// window (not `intermediate_stall_window`: a descent may end a grid spacing away);
+    /// the screening and the descents render one point in 16 of the cloud in 4 m cells
+    /// (`global.search_thinning = 16`: a search in 0.4–0.5 of the time, the same
+    /// success on the protocols, `docs/RESULTS.md`, "Speed").
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2; [`Method::Global`]
     /// asks for the prior box below, [`VvsError::GlobalWithoutPrior`] without one).
@@ -157,6 +160,7 @@ impl Default for Localizer {
                     prune_after_iterations: 3,
                     pruned_to: 10,
                     refined: 3,
+                    search_thinning: 16,
                     ..GlobalConfig::default()
                 },
                 ..VvsConfig::default()

@@ -130,6 +130,18 @@ fn global_settings_are_validated() {
         let message = config.validate().unwrap_err().to_string();
         assert!(message.contains("refine_within"), "{message}");
     }
+    for thinning in [0, 5000] {
+        let mut config = VvsConfig::default();
+        config.global.search_thinning = thinning;
+        let message = config.validate().unwrap_err().to_string();
+        assert!(message.contains("search_thinning"), "{message}");
+    }
+    for size in [0.01, f32::NAN, f32::INFINITY] {
+        let mut config = VvsConfig::default();
+        config.global.search_cell_size_m = size;
+        let message = config.validate().unwrap_err().to_string();
+        assert!(message.contains("search_cell_size_m"), "{message}");
+    }
     let mut config = VvsConfig::default();
     config.global.prune_after_iterations = config.global.descent_iterations;
     let message = config.validate().unwrap_err().to_string();

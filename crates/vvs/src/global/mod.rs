@@ -101,6 +101,15 @@ pub struct GlobalConfig {
     pub tilt_spacing_deg: Option<f64>,
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
+    /// Beyond the paper (1: off): the screening and the descents (with
+    /// `search_downsampling` above 1) render a copy of the cloud thinned to one point in
+    /// this many of each cell, laid out in cells of `search_cell_size_m`
+    /// ([`splat::PointCloud::thinned`], made at a servo's first search): a small image
+    /// needs few points, and its rendering's time goes to the cells' work more than to
+    /// the points. The refinements render the cloud itself.
+    pub search_thinning: u32,
+    /// The thinned copy's cells' edge, metres (with `search_thinning` above 1).
+    pub search_cell_size_m: f32,
     /// Candidates kept after screening, each then descends. On the common support
     /// ([`crate::Support::Common`]) this many by each of two scores (the fraction of
     /// the picture the PGMs' correlation, or their coefficient of determination,
@@ -141,6 +150,8 @@ impl Default for GlobalConfig {
             heading_spacing_deg: Some(15.0),
             tilt_spacing_deg: Some(10.0),
             search_downsampling: 4,
+            search_thinning: 1,
+            search_cell_size_m: 4.0,
             screened: 20,
             descent_iterations: 10,
             prune_after_iterations: 0,
@@ -191,6 +202,20 @@ impl GlobalConfig {
             return bad(
                 "global.search_downsampling",
                 format!("must be in 1..=16, got {}", self.search_downsampling),
+            );
+        }
+        if !(1..=4096).contains(&self.search_thinning) {
+            return bad(
+                "global.search_thinning",
+                format!("must be in 1..=4096, got {}", self.search_thinning),
+            );
+        }
+        if !(self.search_cell_size_m.is_finite()
+            && (0.1..=1000.0).contains(&self.search_cell_size_m))
+        {
+            return bad(
+                "global.search_cell_size_m",
+                format!("must be in [0.1, 1000] m, got {}", self.search_cell_size_m),
             );
         }
         for (name, v) in [

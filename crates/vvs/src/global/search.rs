@@ -8,7 +8,7 @@
 
 use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -22,7 +22,9 @@ use super::{
     BOX_MARGIN_DEG, GlobalConfig, MAX_CANDIDATES, PriorBox, SearchPhase, SearchProgress,
     SearchReport, turned, turned_about_optical_axis,
 };
-use crate::servo::{Level, Planned, Stage, StageResult, outside, render_once};
+use crate::servo::{
+    Level, Planned, SearchCloud, Stage, StageResult, level_cloud, outside, render_once,
+};
 use crate::{Outcome, Servo, StopReason, Support, VvsConfig, VvsError};
 
 /// The most threads a parallel search spreads over (each holds a servo: about
@@ -148,6 +150,7 @@ impl<'a> Servo<'a> {
         }
         let started = Instant::now();
         let search = self.search_level()?;
+        self.prepare_search_cloud()?;
         let desired_small = if factor == 1 {
             desired.clone()
         } else {
@@ -478,6 +481,7 @@ impl<'a> Servo<'a> {
         let mut workers = std::mem::take(&mut self.workers);
         for worker in &mut workers {
             worker.servo.config.clone_from(&config);
+            worker.servo.search_cloud.clone_from(&self.search_cloud);
             worker.servo.vignetting_start = self.vignetting_start;
             worker.scores.costs.resize(orientations, f64::INFINITY);
             worker.scores.squared.resize(orientations, f64::INFINITY);
@@ -485,6 +489,7 @@ impl<'a> Servo<'a> {
         let pool = Mutex::new(workers);
         let next = AtomicUsize::new(items.start);
         let (cloud, camera, start) = (self.cloud, &self.camera, self.vignetting_start);
+        let search_cloud = &self.search_cloud;
         let runs: Vec<Vec<(usize, Result<T, VvsError>)>> = (0..threads.min(items.len()))
             .into_par_iter()
             .map(|_| {
@@ -496,6 +501,7 @@ impl<'a> Servo<'a> {
                         let made =
                             Servo::new(cloud, camera, config.clone()).and_then(|mut servo| {
                                 servo.vignetting_start = start;
+                                servo.search_cloud.clone_from(search_cloud);
                                 servo.search_level()?;
                                 Ok(servo)
                             });
@@ -553,6 +559,30 @@ impl<'a> Servo<'a> {
             }
             _ => Ok(result.cost),
         }
+    }
+
+    /// Make the search level's thinned cloud ([`GlobalConfig::search_thinning`]) unless
+    /// it is made already with these settings; none without thinning, or when the
+    /// search runs at full resolution.
+    fn prepare_search_cloud(&mut self) -> Result<(), VvsError> {
+        let g = &self.config.global;
+        let (thinning, cell_size_m) = (g.search_thinning, g.search_cell_size_m);
+        if thinning <= 1 || g.search_downsampling == 1 {
+            self.search_cloud = None;
+            return Ok(());
+        }
+        if let Some(s) = &self.search_cloud
+            && s.thinning == thinning
+            && s.cell_size_m.to_bits() == cell_size_m.to_bits()
+        {
+            return Ok(());
+        }
+        self.search_cloud = Some(SearchCloud {
+            thinning,
+            cell_size_m,
+            cloud: Arc::new(self.cloud.thinned(thinning, cell_size_m)?),
+        });
+        Ok(())
     }
 
     /// The index of the global search's low-resolution level, built on first use.
@@ -713,7 +743,8 @@ impl<'a> Servo<'a> {
             support,
             ..
         } = &mut self.levels[level];
-        let stats = render_once(renderer, rendered_at, self.cloud, world_from_camera, frame)?;
+        let cloud = level_cloud(self.cloud, &self.search_cloud, &self.config, level);
+        let stats = render_once(renderer, rendered_at, cloud, world_from_camera, frame)?;
         let valid = camera.valid_pixel_count().max(1) as f64;
         if (stats.pixels_hit as f64) / valid < self.config.min_hit_fraction {
             return Ok(());
@@ -891,6 +922,8 @@ fn distinct_best(
 
 #[cfg(test)]
 mod tests {
+    use frame::Frame;
+    use splat::Renderer;
     use ucm::Camera;
 
     use super::*;
@@ -922,6 +955,84 @@ mod tests {
                 .chain(&scores.squared)
                 .all(|c| c.is_infinite())
         );
+    }
+
+    /// With `search_thinning`, the screening and the descents render a copy of the cloud
+    /// with one point in k of each cell, made once for the servo and its workers, and
+    /// each of its renderings draws fewer points than one of the cloud at the same pose;
+    /// the refinements render the cloud. Without it, or at full resolution, no copy.
+    #[test]
+    fn the_search_level_renders_a_thinned_cloud() {
+        let city = world::city::City::generate(&world::city::CityParams::default()).unwrap();
+        let camera =
+            Camera::load_toml(test_support::workspace_root().join("fixtures/omni-320x240.toml"))
+                .unwrap();
+        let truth = world::city::camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.0);
+        let mut config = crate::Localizer::default().config;
+        config.global.search_thinning = 16;
+        let mut servo = Servo::new(&city.cloud, &camera, config.clone()).unwrap();
+        let desired = servo.render(&truth).unwrap();
+        let prior = PriorBox {
+            translation_m: [0.5, 0.5, 0.2],
+            rotation_deg: [1.0, 1.0, 5.0],
+        };
+        let start = truth * Isometry3::from_translation(DVec3::new(0.3, -0.2, 0.1));
+        let outcome = servo.localize_in_box(&desired, start, &prior).unwrap();
+        assert!(outcome.world_from_camera.distance_to(&truth).0 < 0.02);
+        let thinned = servo.search_cloud.clone().expect("a thinned cloud");
+        let expected: usize = city
+            .cloud
+            .cells()
+            .iter()
+            .map(|c| c.len.div_ceil(16) as usize)
+            .sum();
+        assert_eq!((thinned.thinning, thinned.cloud.len()), (16, expected));
+        // The search level's last rendering is of the thinned cloud.
+        let search = config.pyramid_levels as usize;
+        let (at, stats) = servo.levels[search].rendered_at.expect("a rendering");
+        let mut full = Renderer::new(
+            servo.levels[search].camera.clone(),
+            splat::RenderOptions {
+                parallel: false,
+                lod_spacing_px: config.lod_spacing_px,
+                ..splat::RenderOptions::default()
+            },
+        )
+        .unwrap();
+        let mut frame = Frame::for_camera(&servo.levels[search].camera);
+        let of_cloud = full.render(&city.cloud, &at.inverse(), &mut frame).unwrap();
+        assert!(
+            stats.points_drawn < of_cloud.points_drawn,
+            "{stats:?} {of_cloud:?}"
+        );
+        // The next search keeps the copy.
+        servo.localize_in_box(&desired, start, &prior).unwrap();
+        let again = servo.search_cloud.clone().unwrap();
+        assert!(Arc::ptr_eq(&thinned.cloud, &again.cloud));
+        // Without thinning, or searching at full resolution: none.
+        for global in [
+            GlobalConfig {
+                search_thinning: 1,
+                ..config.global.clone()
+            },
+            GlobalConfig {
+                search_downsampling: 1,
+                ..config.global.clone()
+            },
+        ] {
+            let mut servo = Servo::new(
+                &city.cloud,
+                &camera,
+                VvsConfig {
+                    global,
+                    lambda_star_step1: 15.0,
+                    ..config.clone()
+                },
+            )
+            .unwrap();
+            servo.prepare_search_cloud().unwrap();
+            assert!(servo.search_cloud.is_none());
+        }
     }
 
     /// The descents refined: the best, then those ranked within `refine_within` of it

@@ -7,6 +7,7 @@ mod level;
 mod stage;
 mod warp;
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use frame::{AnyImage, Frame};
@@ -64,6 +65,31 @@ pub struct Servo<'a> {
     /// The global search's workers (servos of the same cloud, camera and settings, one
     /// thread each), made on a parallel search's first use and kept for the next.
     pub(crate) workers: Vec<crate::global::SearchWorker<'a>>,
+    /// The global search level's thinned cloud (`GlobalConfig::search_thinning`) and
+    /// the thinning and cell size it was made with, made at the first search.
+    pub(crate) search_cloud: Option<SearchCloud>,
+}
+
+/// A thinned copy of a servo's cloud for the global search's level.
+#[derive(Clone, Debug)]
+pub(crate) struct SearchCloud {
+    pub(crate) thinning: u32,
+    pub(crate) cell_size_m: f32,
+    pub(crate) cloud: Arc<PointCloud>,
+}
+
+/// The cloud that level `level` renders: the search's thinned copy at its level (index
+/// `pyramid_levels`), else the servo's.
+pub(crate) fn level_cloud<'c>(
+    cloud: &'c PointCloud,
+    search_cloud: &'c Option<SearchCloud>,
+    config: &VvsConfig,
+    level: usize,
+) -> &'c PointCloud {
+    match search_cloud {
+        Some(s) if level == config.pyramid_levels as usize => &s.cloud,
+        _ => cloud,
+    }
 }
 
 impl<'a> Servo<'a> {
@@ -105,6 +131,7 @@ impl<'a> Servo<'a> {
             columns: [Vec::new(), Vec::new()],
             vignetting_start: [0.0; 2],
             workers: Vec::new(),
+            search_cloud: None,
         })
     }
 

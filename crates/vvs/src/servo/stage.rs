@@ -10,7 +10,7 @@ use pgm::Pgm;
 use ucm::{Camera, Isometry3};
 
 use super::warp::{self, Reference};
-use super::{Level, render_once};
+use super::{Level, level_cloud, render_once};
 use crate::solve::solve;
 use crate::vignetting::MAX_COEFFICIENT;
 use crate::{
@@ -267,7 +267,8 @@ impl Servo<'_> {
                     }
                 }
                 if between.is_none() {
-                    let stats = render_once(renderer, rendered_at, self.cloud, pose, frame)?;
+                    let cloud = level_cloud(self.cloud, &self.search_cloud, &self.config, level);
+                    let stats = render_once(renderer, rendered_at, cloud, pose, frame)?;
                     let hits = stats.pixels_hit as f64;
                     if hits / valid_count < self.config.min_hit_fraction {
                         break 'stage (StopReason::Diverged(Divergence::NoValidPixels), iteration);
