@@ -119,6 +119,11 @@ fn goal_localization(c: &mut Criterion) {
                 .unwrap()
         })
     });
+    // Prepared once for the cloud and camera: the search's thinned cloud made once too.
+    let mut prepared = global.prepare(&city.cloud, &camera).unwrap();
+    group.bench_function("prepared_localizer_in_the_paper_box/from_6m", |b| {
+        b.iter(|| prepared.localize(&picture, corner).unwrap())
+    });
     let global = Localizer {
         config: VvsConfig {
             parallel: true,
