@@ -420,7 +420,9 @@ impl PointCloud {
     /// spacing `√k` times this one's: what a low-resolution camera needs of the cloud
     /// (its renderings draw as many points a pixel, from fewer and larger cells, the
     /// level of detail's per-cell work being most of a small image's time). Positions
-    /// are rounded to the new cells' steps; colours follow their points.
+    /// are rounded to the new cells' steps (kept within [`MAX_OFFSET_M`] of the origin);
+    /// colours follow their points. A cell of fewer than `k` points keeps one, drawn with
+    /// the copy's wider spacing (larger splats).
     ///
     /// Errors: `keep_one_in` 0, or a cell size below [`MIN_CELL_SIZE_M`] or not finite.
     pub fn thinned(&self, keep_one_in: u32, cell_size_m: f32) -> Result<Self, SplatError> {
@@ -441,7 +443,10 @@ impl PointCloud {
         for cell in &self.cells {
             for i in kept(cell) {
                 let (p, intensity) = self.decode(cell, &self.points[i]);
-                positions.push(self.origin + p);
+                // A point placed to the step may lie half a step past the limit.
+                positions.push(
+                    self.origin + p.clamp(DVec3::splat(-MAX_OFFSET_M), DVec3::splat(MAX_OFFSET_M)),
+                );
                 intensities.push(intensity);
                 if let (Some(out), Some(all)) = (colors.as_mut(), self.colors.as_ref()) {
                     out.push(all[i]);

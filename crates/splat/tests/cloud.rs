@@ -93,7 +93,7 @@ fn the_generators_values_by_index_are_its_sequence() {
 /// A thinned cloud keeps each cell's first `⌈len / k⌉` points, where they were (to half
 /// a step of either layout), with their intensities and colours, in cells of the new
 /// size, spaced `√k` times wider (one in one, in the same cells: every point, in the
-/// same cells, shuffled again).
+/// same cells, shuffled again; one in more than any cell holds: one a cell).
 /// Keeping none, or cells of no size, is refused.
 #[test]
 fn a_thinned_cloud_keeps_each_cells_first_points() {
@@ -154,6 +154,13 @@ fn a_thinned_cloud_keeps_each_cells_first_points() {
         assert!((w.0 - g.0).abs().max_element() <= tolerance, "{w:?} {g:?}");
         assert_eq!((w.1.to_bits(), w.2), (g.1.to_bits(), g.2));
     }
+
+    // Without colours; every cell down to one point, in the same cells.
+    let grey = PointCloud::build(origin, &positions, &intensities, None, Some(0.05), 2.0).unwrap();
+    let one_each = grey.thinned(u32::MAX, 2.0).unwrap();
+    assert_eq!(one_each.len(), grey.cells().len());
+    assert_eq!(one_each.cells().len(), grey.cells().len());
+    assert!(one_each.colors().is_none());
 
     assert!(cloud.thinned(0, 2.0).is_err());
     assert!(cloud.thinned(2, 0.0).is_err());

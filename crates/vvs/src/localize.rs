@@ -113,7 +113,7 @@ pub struct Localizer {
     /// per-iteration history. One thread (`parallel = false`, what the speed goals are
     /// stated for); `parallel = true` spreads each rendering (in up to 8 runs) and the
     /// PGM's convolutions over rayon's threads, and a global search's nodes, descents
-    /// and refinements (on two cores a global search in 0.54–0.68 of the time; a
+    /// and refinements (on two cores a global search in 0.52–0.68 of the time; a
     /// prepared local localisation no faster since its warped iterations run on one:
     /// `docs/RESULTS.md`, "Speed"), the same bits. With a
     /// prior box, the global search's descents pruned (`global.prune_after_iterations
@@ -124,9 +124,13 @@ pub struct Localizer {
     /// (`global.refined = 3`: on a photograph two basins may rank alike at low
     /// resolution, "Real pictures"), each refinement's stages run to the full stall
     /// window (not `intermediate_stall_window`: a descent may end a grid spacing away);
-    /// the screening and the descents render one point in 16 of the cloud in 4 m cells
-    /// (`global.search_thinning = 16`: a search in 0.4–0.5 of the time, the same
-    /// success on the protocols, `docs/RESULTS.md`, "Speed").
+    /// the screening and the descents, at a quarter of the resolution, render one point
+    /// in 16 of the cloud in 4 m cells (`global.thin_search_cloud`: a search from the
+    /// paper's box in 0.59 s instead of 1.2–1.4 with AVX-512, 0.84 s without, one core
+    /// of the Intel VM; the same success on the city's protocols; 7-Scenes' block 5/6
+    /// against the SfM poses instead of 6/6, its sixth query ending at its optimum
+    /// 5.02 cm from its pose instead of 4.97: `docs/RESULTS.md`, "Speed"). A tracker's
+    /// recovery searches so too.
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2; [`Method::Global`]
     /// asks for the prior box below, [`VvsError::GlobalWithoutPrior`] without one).
@@ -160,7 +164,7 @@ impl Default for Localizer {
                     prune_after_iterations: 3,
                     pruned_to: 10,
                     refined: 3,
-                    search_thinning: 16,
+                    thin_search_cloud: true,
                     ..GlobalConfig::default()
                 },
                 ..VvsConfig::default()

@@ -101,14 +101,18 @@ pub struct GlobalConfig {
     pub tilt_spacing_deg: Option<f64>,
     /// The screening and the descents run on images this many times smaller (λ*₁ too).
     pub search_downsampling: u32,
-    /// Beyond the paper (1: off): the screening and the descents (with
-    /// `search_downsampling` above 1) render a copy of the cloud thinned to one point in
-    /// this many of each cell, laid out in cells of `search_cell_size_m`
-    /// ([`splat::PointCloud::thinned`], made at a servo's first search): a small image
-    /// needs few points, and its rendering's time goes to the cells' work more than to
-    /// the points. The refinements render the cloud itself.
-    pub search_thinning: u32,
-    /// The thinned copy's cells' edge, metres (with `search_thinning` above 1).
+    /// Beyond the paper (default false): the screening and the descents (with
+    /// `search_downsampling` above 1) render a copy of the cloud with one point in
+    /// `search_downsampling²` of each cell, laid out in cells of `search_cell_size_m`
+    /// ([`splat::PointCloud::thinned`], made at a servo's first search): an image with
+    /// that many times fewer pixels, with that many times fewer points a pixel as the
+    /// full resolution has of the cloud, whatever the camera's resolution; its
+    /// rendering's time went to the cells' work more than to the points. The
+    /// refinements render the cloud itself. Its spacing is the cloud's times
+    /// `search_downsampling`, so a cell with fewer points than that keeps one with larger
+    /// splats.
+    pub thin_search_cloud: bool,
+    /// The thinned copy's cells' edge, metres (with `thin_search_cloud`).
     pub search_cell_size_m: f32,
     /// Candidates kept after screening, each then descends. On the common support
     /// ([`crate::Support::Common`]) this many by each of two scores (the fraction of
@@ -150,7 +154,7 @@ impl Default for GlobalConfig {
             heading_spacing_deg: Some(15.0),
             tilt_spacing_deg: Some(10.0),
             search_downsampling: 4,
-            search_thinning: 1,
+            thin_search_cloud: false,
             search_cell_size_m: 4.0,
             screened: 20,
             descent_iterations: 10,
@@ -202,12 +206,6 @@ impl GlobalConfig {
             return bad(
                 "global.search_downsampling",
                 format!("must be in 1..=16, got {}", self.search_downsampling),
-            );
-        }
-        if !(1..=4096).contains(&self.search_thinning) {
-            return bad(
-                "global.search_thinning",
-                format!("must be in 1..=4096, got {}", self.search_thinning),
             );
         }
         if !(self.search_cell_size_m.is_finite()

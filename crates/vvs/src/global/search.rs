@@ -481,7 +481,18 @@ impl<'a> Servo<'a> {
         let mut workers = std::mem::take(&mut self.workers);
         for worker in &mut workers {
             worker.servo.config.clone_from(&config);
-            worker.servo.search_cloud.clone_from(&self.search_cloud);
+            let same = match (&worker.servo.search_cloud, &self.search_cloud) {
+                (Some(a), Some(b)) => Arc::ptr_eq(&a.cloud, &b.cloud),
+                (a, b) => a.is_none() && b.is_none(),
+            };
+            if !same {
+                // Its search level rendered another cloud.
+                worker.servo.search_cloud.clone_from(&self.search_cloud);
+                let search = worker.servo.config.pyramid_levels as usize;
+                if let Some(level) = worker.servo.levels.get_mut(search) {
+                    level.rendered_at = None;
+                }
+            }
             worker.servo.vignetting_start = self.vignetting_start;
             worker.scores.costs.resize(orientations, f64::INFINITY);
             worker.scores.squared.resize(orientations, f64::INFINITY);
@@ -561,27 +572,32 @@ impl<'a> Servo<'a> {
         }
     }
 
-    /// Make the search level's thinned cloud ([`GlobalConfig::search_thinning`]) unless
-    /// it is made already with these settings; none without thinning, or when the
-    /// search runs at full resolution.
+    /// Make the search level's thinned cloud ([`GlobalConfig::thin_search_cloud`])
+    /// unless it is made already with these settings; none without thinning, or when
+    /// the search runs at full resolution. A search level that rendered another cloud
+    /// renders again.
     fn prepare_search_cloud(&mut self) -> Result<(), VvsError> {
         let g = &self.config.global;
-        let (thinning, cell_size_m) = (g.search_thinning, g.search_cell_size_m);
-        if thinning <= 1 || g.search_downsampling == 1 {
-            self.search_cloud = None;
+        let (factor, cell_size_m) = (g.search_downsampling, g.search_cell_size_m);
+        let wanted = (g.thin_search_cloud && factor > 1).then_some(factor * factor);
+        let made = self
+            .search_cloud
+            .as_ref()
+            .map(|s| (s.thinning, s.cell_size_m.to_bits()));
+        if made == wanted.map(|k| (k, cell_size_m.to_bits())) {
             return Ok(());
         }
-        if let Some(s) = &self.search_cloud
-            && s.thinning == thinning
-            && s.cell_size_m.to_bits() == cell_size_m.to_bits()
-        {
-            return Ok(());
+        self.search_cloud = match wanted {
+            Some(thinning) => Some(SearchCloud {
+                thinning,
+                cell_size_m,
+                cloud: Arc::new(self.cloud.thinned(thinning, cell_size_m)?),
+            }),
+            None => None,
+        };
+        if let Some(level) = self.levels.get_mut(self.config.pyramid_levels as usize) {
+            level.rendered_at = None;
         }
-        self.search_cloud = Some(SearchCloud {
-            thinning,
-            cell_size_m,
-            cloud: Arc::new(self.cloud.thinned(thinning, cell_size_m)?),
-        });
         Ok(())
     }
 
@@ -957,10 +973,11 @@ mod tests {
         );
     }
 
-    /// With `search_thinning`, the screening and the descents render a copy of the cloud
-    /// with one point in k of each cell, made once for the servo and its workers, and
-    /// each of its renderings draws fewer points than one of the cloud at the same pose;
-    /// the refinements render the cloud. Without it, or at full resolution, no copy.
+    /// With `thin_search_cloud`, the screening and the descents render a copy of the
+    /// cloud with one point in 16 of each cell (searching at a quarter of the
+    /// resolution), made once for the servo, and each of its renderings draws fewer
+    /// points than one of the cloud at the same pose; the refinements render the cloud.
+    /// Without it, or at full resolution, no copy.
     #[test]
     fn the_search_level_renders_a_thinned_cloud() {
         let city = world::city::City::generate(&world::city::CityParams::default()).unwrap();
@@ -968,8 +985,8 @@ mod tests {
             Camera::load_toml(test_support::workspace_root().join("fixtures/omni-320x240.toml"))
                 .unwrap();
         let truth = world::city::camera_looking_down(DVec3::new(-20.0, 0.5, 3.0), 0.0);
-        let mut config = crate::Localizer::default().config;
-        config.global.search_thinning = 16;
+        let config = crate::Localizer::default().config;
+        assert!(config.global.thin_search_cloud);
         let mut servo = Servo::new(&city.cloud, &camera, config.clone()).unwrap();
         let desired = servo.render(&truth).unwrap();
         let prior = PriorBox {
@@ -1005,6 +1022,22 @@ mod tests {
             stats.points_drawn < of_cloud.points_drawn,
             "{stats:?} {of_cloud:?}"
         );
+        // The refinement's last rendering, at full resolution, is of the cloud.
+        let (at, stats) = servo.levels[0].rendered_at.expect("a rendering");
+        let mut full = Renderer::new(
+            camera.clone(),
+            splat::RenderOptions {
+                parallel: false,
+                lod_spacing_px: config.lod_spacing_px,
+                ..splat::RenderOptions::default()
+            },
+        )
+        .unwrap();
+        let mut frame = Frame::for_camera(&camera);
+        assert_eq!(
+            stats,
+            full.render(&city.cloud, &at.inverse(), &mut frame).unwrap()
+        );
         // The next search keeps the copy.
         servo.localize_in_box(&desired, start, &prior).unwrap();
         let again = servo.search_cloud.clone().unwrap();
@@ -1012,7 +1045,7 @@ mod tests {
         // Without thinning, or searching at full resolution: none.
         for global in [
             GlobalConfig {
-                search_thinning: 1,
+                thin_search_cloud: false,
                 ..config.global.clone()
             },
             GlobalConfig {

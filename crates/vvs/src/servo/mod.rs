@@ -65,7 +65,7 @@ pub struct Servo<'a> {
     /// The global search's workers (servos of the same cloud, camera and settings, one
     /// thread each), made on a parallel search's first use and kept for the next.
     pub(crate) workers: Vec<crate::global::SearchWorker<'a>>,
-    /// The global search level's thinned cloud (`GlobalConfig::search_thinning`) and
+    /// The global search level's thinned cloud (`GlobalConfig::thin_search_cloud`), with
     /// the thinning and cell size it was made with, made at the first search.
     pub(crate) search_cloud: Option<SearchCloud>,
 }
