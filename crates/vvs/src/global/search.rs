@@ -22,9 +22,7 @@ use super::{
     BOX_MARGIN_DEG, GlobalConfig, MAX_CANDIDATES, PriorBox, SearchPhase, SearchProgress,
     SearchReport, turned, turned_about_optical_axis,
 };
-use crate::servo::{
-    Level, Planned, SearchCloud, Stage, StageResult, level_cloud, outside, render_once,
-};
+use crate::servo::{Level, Planned, Stage, StageResult, level_cloud, outside, render_once};
 use crate::{Outcome, Servo, StopReason, Support, VvsConfig, VvsError};
 
 /// The most threads a parallel search spreads over (each holds a servo: about
@@ -481,18 +479,6 @@ impl<'a> Servo<'a> {
         let mut workers = std::mem::take(&mut self.workers);
         for worker in &mut workers {
             worker.servo.config.clone_from(&config);
-            let same = match (&worker.servo.search_cloud, &self.search_cloud) {
-                (Some(a), Some(b)) => Arc::ptr_eq(&a.cloud, &b.cloud),
-                (a, b) => a.is_none() && b.is_none(),
-            };
-            if !same {
-                // Its search level rendered another cloud.
-                worker.servo.search_cloud.clone_from(&self.search_cloud);
-                let search = worker.servo.config.pyramid_levels as usize;
-                if let Some(level) = worker.servo.levels.get_mut(search) {
-                    level.rendered_at = None;
-                }
-            }
             worker.servo.vignetting_start = self.vignetting_start;
             worker.scores.costs.resize(orientations, f64::INFINITY);
             worker.scores.squared.resize(orientations, f64::INFINITY);
@@ -572,31 +558,16 @@ impl<'a> Servo<'a> {
         }
     }
 
-    /// Make the search level's thinned cloud ([`GlobalConfig::thin_search_cloud`])
-    /// unless it is made already with these settings; none without thinning, or when
-    /// the search runs at full resolution. A search level that rendered another cloud
-    /// renders again.
+    /// Make the search level's thinned cloud ([`GlobalConfig::thin_search_cloud`]) at
+    /// the first search; none without thinning, or when the search runs at full
+    /// resolution. Made before the search level renders anything, and a servo's
+    /// settings do not change: that level only ever renders the copy.
     fn prepare_search_cloud(&mut self) -> Result<(), VvsError> {
         let g = &self.config.global;
-        let (factor, cell_size_m) = (g.search_downsampling, g.search_cell_size_m);
-        let wanted = (g.thin_search_cloud && factor > 1).then_some(factor * factor);
-        let made = self
-            .search_cloud
-            .as_ref()
-            .map(|s| (s.thinning, s.cell_size_m.to_bits()));
-        if made == wanted.map(|k| (k, cell_size_m.to_bits())) {
-            return Ok(());
-        }
-        self.search_cloud = match wanted {
-            Some(thinning) => Some(SearchCloud {
-                thinning,
-                cell_size_m,
-                cloud: Arc::new(self.cloud.thinned(thinning, cell_size_m)?),
-            }),
-            None => None,
-        };
-        if let Some(level) = self.levels.get_mut(self.config.pyramid_levels as usize) {
-            level.rendered_at = None;
+        let factor = g.search_downsampling;
+        if self.search_cloud.is_none() && g.thin_search_cloud && factor > 1 {
+            let thinned = self.cloud.thinned(factor * factor, g.search_cell_size_m)?;
+            self.search_cloud = Some(Arc::new(thinned));
         }
         Ok(())
     }
@@ -1003,45 +974,35 @@ mod tests {
             .iter()
             .map(|c| c.len.div_ceil(16) as usize)
             .sum();
-        assert_eq!((thinned.thinning, thinned.cloud.len()), (16, expected));
-        // The search level's last rendering is of the thinned cloud.
-        let search = config.pyramid_levels as usize;
-        let (at, stats) = servo.levels[search].rendered_at.expect("a rendering");
-        let mut full = Renderer::new(
-            servo.levels[search].camera.clone(),
-            splat::RenderOptions {
+        assert_eq!(thinned.len(), expected);
+        // What a level's last rendering drew, and what the whole cloud draws there.
+        let drawn = |level: &Level| {
+            let (at, stats) = level.rendered_at.expect("a rendering");
+            let options = splat::RenderOptions {
                 parallel: false,
                 lod_spacing_px: config.lod_spacing_px,
                 ..splat::RenderOptions::default()
-            },
-        )
-        .unwrap();
-        let mut frame = Frame::for_camera(&servo.levels[search].camera);
-        let of_cloud = full.render(&city.cloud, &at.inverse(), &mut frame).unwrap();
+            };
+            let mut renderer = Renderer::new(level.camera.clone(), options).unwrap();
+            let mut frame = Frame::for_camera(&level.camera);
+            let of_cloud = renderer
+                .render(&city.cloud, &at.inverse(), &mut frame)
+                .unwrap();
+            (stats, of_cloud)
+        };
+        // The search level's last rendering is of the thinned cloud…
+        let (stats, of_cloud) = drawn(&servo.levels[config.pyramid_levels as usize]);
         assert!(
             stats.points_drawn < of_cloud.points_drawn,
             "{stats:?} {of_cloud:?}"
         );
-        // The refinement's last rendering, at full resolution, is of the cloud.
-        let (at, stats) = servo.levels[0].rendered_at.expect("a rendering");
-        let mut full = Renderer::new(
-            camera.clone(),
-            splat::RenderOptions {
-                parallel: false,
-                lod_spacing_px: config.lod_spacing_px,
-                ..splat::RenderOptions::default()
-            },
-        )
-        .unwrap();
-        let mut frame = Frame::for_camera(&camera);
-        assert_eq!(
-            stats,
-            full.render(&city.cloud, &at.inverse(), &mut frame).unwrap()
-        );
+        // … the refinement's, at full resolution, of the cloud.
+        let (stats, of_cloud) = drawn(&servo.levels[0]);
+        assert_eq!(stats, of_cloud);
         // The next search keeps the copy.
         servo.localize_in_box(&desired, start, &prior).unwrap();
         let again = servo.search_cloud.clone().unwrap();
-        assert!(Arc::ptr_eq(&thinned.cloud, &again.cloud));
+        assert!(Arc::ptr_eq(&thinned, &again));
         // Without thinning, or searching at full resolution: none.
         for global in [
             GlobalConfig {

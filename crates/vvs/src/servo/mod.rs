@@ -65,29 +65,22 @@ pub struct Servo<'a> {
     /// The global search's workers (servos of the same cloud, camera and settings, one
     /// thread each), made on a parallel search's first use and kept for the next.
     pub(crate) workers: Vec<crate::global::SearchWorker<'a>>,
-    /// The global search level's thinned cloud (`GlobalConfig::thin_search_cloud`), with
-    /// the thinning and cell size it was made with, made at the first search.
-    pub(crate) search_cloud: Option<SearchCloud>,
-}
-
-/// A thinned copy of a servo's cloud for the global search's level.
-#[derive(Clone, Debug)]
-pub(crate) struct SearchCloud {
-    pub(crate) thinning: u32,
-    pub(crate) cell_size_m: f32,
-    pub(crate) cloud: Arc<PointCloud>,
+    /// The global search level's thinned cloud (`GlobalConfig::thin_search_cloud`),
+    /// made at the first search (a servo's settings do not change), shared with its
+    /// workers.
+    pub(crate) search_cloud: Option<Arc<PointCloud>>,
 }
 
 /// The cloud that level `level` renders: the search's thinned copy at its level (index
 /// `pyramid_levels`), else the servo's.
 pub(crate) fn level_cloud<'c>(
     cloud: &'c PointCloud,
-    search_cloud: &'c Option<SearchCloud>,
+    search_cloud: &'c Option<Arc<PointCloud>>,
     config: &VvsConfig,
     level: usize,
 ) -> &'c PointCloud {
     match search_cloud {
-        Some(s) if level == config.pyramid_levels as usize => &s.cloud,
+        Some(thinned) if level == config.pyramid_levels as usize => thinned,
         _ => cloud,
     }
 }
