@@ -197,6 +197,17 @@ pub struct VvsConfig {
     /// Beyond the paper (off by default): Levenberg–Marquardt damping `η`, solving
     /// `(JᵀJ + η diag(JᵀJ)) x = Jᵀe`.
     pub levenberg_marquardt: Option<f64>,
+    /// Beyond the paper (`None`: off): in a method's last stage (step 2, or PoVS), an
+    /// update that continues the last one (the cosine of the two above 0.9) and is
+    /// shorter by a ratio `r` in (0.5, 1) is lengthened by `1 / (1 − r)`, at most this
+    /// many times. Where Gauss–Newton converges linearly, each step `r` times the last
+    /// (on a photograph the rendering's `L_G` overestimates the cost's curvature along
+    /// a valley, `r` about 0.9), the steps left sum to the last one times `r / (1 − r)`:
+    /// the lengthened update jumps to their end, and the convergence tests then measure
+    /// it, an estimate of the distance left rather than one step of a crawl. Translations
+    /// and rotations are compared as image motions (the translation over the
+    /// rendering's mean range, as `converged_px`).
+    pub extrapolate_steps: Option<f64>,
     /// Beyond the paper (off by default): robust weighting of the residuals.
     pub robust: Option<Robust>,
     /// Beyond the paper (1: off): coarse-to-fine image pyramid. With `n` levels, step 1
@@ -268,6 +279,7 @@ impl Default for VvsConfig {
             min_hit_fraction: 0.02,
             bounds_margin_m: 5.0,
             levenberg_marquardt: None,
+            extrapolate_steps: None,
             robust: None,
             pyramid_levels: 1,
             coarse_min_lambda_px: None,
@@ -346,6 +358,11 @@ impl VvsConfig {
             && !(eta >= 0.0 && eta.is_finite())
         {
             return bad("levenberg_marquardt", format!("must be >= 0, got {eta}"));
+        }
+        if let Some(cap) = self.extrapolate_steps
+            && !(cap >= 1.0 && cap.is_finite())
+        {
+            return bad("extrapolate_steps", format!("must be >= 1, got {cap}"));
         }
         if let Some(Robust::Tukey { c }) = self.robust
             && !(c > 0.0 && c.is_finite())

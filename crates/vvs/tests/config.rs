@@ -8,6 +8,7 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
         },
         robust: Some(Robust::Tukey { c: 4.685 }),
         levenberg_marquardt: Some(0.01),
+        extrapolate_steps: Some(4.0),
         pyramid_levels: 3,
         coarse_min_lambda_px: Some(1.5),
         lambda_schedule: vec![7.5, 3.0],
@@ -52,6 +53,9 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
             "pgm_interaction_row_step_lambdas = inf",
             "pgm_interaction_row_step_lambdas",
         ),
+        ("extrapolate_steps = 0.5", "extrapolate_steps"),
+        ("extrapolate_steps = nan", "extrapolate_steps"),
+        ("extrapolate_steps = inf", "extrapolate_steps"),
         ("pyramid_levels = 0", "pyramid_levels"),
         ("pyramid_levels = 6", "pyramid_levels"),
         (

@@ -427,6 +427,37 @@ fn convergence_in_pixels_ends_at_the_same_place_sooner() {
     assert!(3 * nb <= 2 * na, "{nb} against {na} iterations");
 }
 
+/// Step 2's updates lengthened where they continue the last one (`extrapolate_steps`):
+/// with the paper's gain of 0.2 each update of step 2 is about 0.8 times the last (a
+/// linear convergence, as Gauss–Newton's on a photograph); lengthened, the stage ends
+/// at the same place in at most half the iterations. Step 1 is left alone.
+#[test]
+fn lengthened_updates_end_a_linear_convergence_at_the_same_place_sooner() {
+    let paper = VvsConfig {
+        keep_history: false,
+        ..VvsConfig::default()
+    };
+    let lengthened = VvsConfig {
+        extrapolate_steps: Some(8.0),
+        ..paper.clone()
+    };
+    let [(a, ta), (b, tb)] = rule2_from_half_a_metre([paper, lengthened]);
+    eprintln!(
+        "paper: {ta} m, {:?}; lengthened: {tb} m, {:?}",
+        a.iterations, b.iterations
+    );
+    assert_eq!(a.iterations[0], b.iterations[0], "step 1 is not lengthened");
+    assert!(ta < 0.002 && tb < 0.002, "{ta} m, {tb} m");
+    let (apart, _) = a.world_from_camera.distance_to(&b.world_from_camera);
+    assert!(apart < 0.001, "{apart} m apart");
+    assert!(
+        2 * b.iterations[1] <= a.iterations[1],
+        "step 2: {:?} against {:?}",
+        b.iterations,
+        a.iterations
+    );
+}
+
 /// Rendering only when the image has moved (`rerender_px`, in between the picture
 /// warped into the last rendering): the same place as rendering at every iteration,
 /// with fewer renderings, on the city's rendering and on its picture as a camera

@@ -558,14 +558,15 @@ impl Benchmark {
             _ => (&self.camera, &self.pictures[job.query]),
         };
         if job.reference {
-            // The paper's gain, no damping and the paper's convergence thresholds:
-            // small steps down to the optimum.
+            // The paper's gain, no damping, no lengthened steps and the paper's
+            // convergence thresholds: small steps down to the optimum.
             let paper = VvsConfig::default();
             let config = VvsConfig {
                 stall_window: 0,
                 max_iterations: 400,
                 gain: paper.gain,
                 levenberg_marquardt: paper.levenberg_marquardt,
+                extrapolate_steps: paper.extrapolate_steps,
                 converged_translation_m: paper.converged_translation_m,
                 converged_rotation_rad: paper.converged_rotation_rad,
                 converged_px: paper.converged_px,

@@ -229,6 +229,14 @@ impl Servo<'_> {
         let mut coverage = 1.0f64;
         let mut cost = f64::NAN;
         self.costs.clear();
+        // Beyond the paper: a method's last stage lengthens updates that continue the
+        // last one (`VvsConfig::extrapolate_steps`), compared with the last update as
+        // computed.
+        let extrapolate = self
+            .config
+            .extrapolate_steps
+            .filter(|_| stage_number == 2 || stage == Stage::Brightness);
+        let mut last_update: Option<[f64; 6]> = None;
         let (stop, iterations) = 'stage: {
             for iteration in 0..budget {
                 let started = Instant::now();
@@ -508,7 +516,20 @@ impl Servo<'_> {
                     break 'stage (StopReason::Diverged(Divergence::SingularSystem), iteration);
                 };
                 let gain = self.config.gain;
-                let v = x.map(|c| -gain * c);
+                let mut v = x.map(|c| -gain * c);
+                if let Some(cap) = extrapolate {
+                    let computed = v;
+                    if let Some(last) = last_update {
+                        let inverse_range = match (&rerender_px, &reference) {
+                            (Some(_), Some(r)) => r.mean_inverse_range,
+                            _ => mean_inverse_range(frame),
+                        };
+                        if let Some(factor) = extrapolation(&v, &last, inverse_range, cap) {
+                            v = v.map(|c| c * factor);
+                        }
+                    }
+                    last_update = Some(computed);
+                }
                 let lambda_dot = (-gain * lambda_x) as f32;
                 let update_t = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
                 let update_r = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
@@ -598,6 +619,39 @@ fn compute_feature(
         Stage::Pgm { .. } => pgm.compute(picture, lambda, jacobian)?,
     }
     Ok(())
+}
+
+/// `VvsConfig::extrapolate_steps`' factor for `update` after `last` (twists as
+/// computed, translation first, in consecutive camera frames): `1 / (1 − r)`, at most
+/// `cap`, when the update continues the last one (cosine above 0.9) and is `r` in
+/// (0.5, 1) times as long; `None` otherwise. Each twist is compared as an image motion,
+/// its translation times the rendering's mean inverse range `inverse_range_per_m`.
+fn extrapolation(
+    update: &[f64; 6],
+    last: &[f64; 6],
+    inverse_range_per_m: f64,
+    cap: f64,
+) -> Option<f64> {
+    let motion = |v: &[f64; 6]| -> [f64; 6] {
+        std::array::from_fn(|k| {
+            if k < 3 {
+                v[k] * inverse_range_per_m
+            } else {
+                v[k]
+            }
+        })
+    };
+    let (a, b) = (motion(update), motion(last));
+    let dot: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+    let (norm_a, norm_b) = (
+        a.iter().map(|x| x * x).sum::<f64>().sqrt(),
+        b.iter().map(|x| x * x).sum::<f64>().sqrt(),
+    );
+    if !(norm_a > 0.0 && norm_b > 0.0) {
+        return None;
+    }
+    let (cosine, ratio) = (dot / (norm_a * norm_b), norm_a / norm_b);
+    (cosine > 0.9 && ratio > 0.5 && ratio < 1.0).then(|| (1.0 / (1.0 - ratio)).min(cap))
 }
 
 /// `VvsConfig::converged_px`'s test: an update changes λ by less than `px` pixels and
@@ -712,6 +766,40 @@ fn tukey_weights(residuals: &[f32], c: f32, weights: &mut [f32], scratch: &mut V
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `extrapolate_steps`' factor: `1 / (1 − r)` for an update `r` times the last in
+    /// its direction, at most the cap; none for a turn, a reversal, a longer update or
+    /// one shorter than half; translations weighed as image motions.
+    #[test]
+    fn an_update_that_continues_the_last_one_is_lengthened() {
+        let last = [0.01, -0.02, 0.005, 0.002, 0.001, -0.003];
+        let scaled = |r: f64| last.map(|c| c * r);
+        let factor = |update: &[f64; 6], cap| extrapolation(update, &last, 0.25, cap);
+        assert!((factor(&scaled(0.9), 100.0).unwrap() - 10.0).abs() < 1e-9);
+        assert!((factor(&scaled(0.75), 100.0).unwrap() - 4.0).abs() < 1e-9);
+        assert_eq!(factor(&scaled(0.9), 4.0), Some(4.0));
+        for r in [0.5, 0.3, 1.0, 1.2, -0.9] {
+            assert_eq!(factor(&scaled(r), 100.0), None, "r = {r}");
+        }
+        assert_eq!(factor(&[0.0; 6], 100.0), None);
+        // Turned: the cosine below 0.9.
+        let mut turned = scaled(0.8);
+        turned[3] = -turned[3] - 0.004;
+        assert_eq!(factor(&turned, 100.0), None);
+        // The translation turned by 90°, the rotation kept: seen at 100 m the translations
+        // weigh little against the rotation and the update continues the last one; at
+        // 10 cm they dominate and it does not.
+        let sideways = [
+            0.02 * 0.8,
+            0.01 * 0.8,
+            0.0,
+            0.002 * 0.8,
+            0.001 * 0.8,
+            -0.003 * 0.8,
+        ];
+        assert!(extrapolation(&sideways, &last, 0.01, 100.0).is_some());
+        assert_eq!(extrapolation(&sideways, &last, 10.0, 100.0), None);
+    }
 
     /// `α (‖t‖ / ρ̄ + ‖ω‖)`: `1/ρ̄` the mean inverse range of the hits alone, `α` the
     /// level's (halved at half the resolution); the test also bounds λ's change.
