@@ -206,7 +206,9 @@ pub struct VvsConfig {
     /// the lengthened update jumps to their end, and the convergence tests then measure
     /// it, an estimate of the distance left rather than one step of a crawl. Translations
     /// and rotations are compared as image motions (the translation over the
-    /// rendering's mean range, as `converged_px`).
+    /// rendering's mean range, as `converged_px`; a warped iteration's update is in the
+    /// last rendering's frame, a second-order difference). Only the pose's update is
+    /// lengthened, not λ's or the vignetting's. At least 1 (1: nothing lengthened).
     pub extrapolate_steps: Option<f64>,
     /// Beyond the paper (off by default): robust weighting of the residuals.
     pub robust: Option<Robust>,

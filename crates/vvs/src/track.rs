@@ -189,8 +189,8 @@ impl<'a> Tracker<'a> {
     /// before, well inside λ = 7.5's basin; λ = 15 widens the basin for starts metres
     /// away, but its optimum lies centimetres from the picture's and step 2 does not
     /// always come back. Measured (`docs/RESULTS.md`, "Tracking"): on the city's shaken
-    /// sequence with 1 frame in 1 to 20, RMSE 1.6–2.4 cm against the localiser's
-    /// 1.6–3.4, in 14–16 iterations a frame against 21–25, never lost; on 7-Scenes'
+    /// sequence with 1 frame in 1 to 20, RMSE 1.5–1.8 cm against the localiser's
+    /// 1.6–4.6, in 11–13 iterations a frame against 18–19, never lost; on 7-Scenes'
     /// held-out block (KinectFusion poses, 1 frame in 1 to 10) the largest error 13 cm
     /// against 22, never lost, in less time. From λ* = 3 alone
     /// (`lambda_schedule` empty) tracks are lost with 1 frame in 10 or 20.
@@ -200,7 +200,7 @@ impl<'a> Tracker<'a> {
     /// With a [`Recovery`], the search screens at this λ*₁ too (divided by
     /// `global.search_downsampling`) and refines with this plan; for the localiser's
     /// search, build the servo with `lambda_star_step1 = 15`, `lambda_schedule =
-    /// [7.5, 3]` and `pyramid_levels = 2`.
+    /// [7.5, 3]`, `pyramid_levels = 2` and `extrapolate_steps = Some(4.0)`.
     pub fn default_config() -> VvsConfig {
         VvsConfig {
             lambda_star_step1: 7.5,

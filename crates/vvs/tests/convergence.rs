@@ -447,6 +447,7 @@ fn lengthened_updates_end_a_linear_convergence_at_the_same_place_sooner() {
         a.iterations, b.iterations
     );
     assert_eq!(a.iterations[0], b.iterations[0], "step 1 is not lengthened");
+    assert_eq!(b.stop, StopReason::Converged);
     assert!(ta < 0.002 && tb < 0.002, "{ta} m, {tb} m");
     let (apart, _) = a.world_from_camera.distance_to(&b.world_from_camera);
     assert!(apart < 0.001, "{apart} m apart");

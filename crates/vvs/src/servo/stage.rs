@@ -782,10 +782,18 @@ mod tests {
             assert_eq!(factor(&scaled(r), 100.0), None, "r = {r}");
         }
         assert_eq!(factor(&[0.0; 6], 100.0), None);
-        // Turned: the cosine below 0.9.
-        let mut turned = scaled(0.8);
-        turned[3] = -turned[3] - 0.004;
+        // Turned, 0.8 times as long: the cosine (0.23) below 0.9.
+        let turned = [last[1], -last[0], last[2], last[4], -last[3], last[5]].map(|c| c * 0.8);
         assert_eq!(factor(&turned, 100.0), None);
+        // Turned by a cosine of 0.913, lengthened; of 0.894, not (ratios 0.80 and 0.83).
+        let turned_by = |e: f64| {
+            let mut v = scaled(0.7);
+            v[3] += e;
+            v[4] -= e;
+            v
+        };
+        assert!(factor(&turned_by(0.0016), 100.0).is_some());
+        assert_eq!(factor(&turned_by(0.0018), 100.0), None);
         // The translation turned by 90°, the rotation kept: seen at 100 m the translations
         // weigh little against the rotation and the update continues the last one; at
         // 10 cm they dominate and it does not.
