@@ -515,18 +515,27 @@ impl Servo<'_> {
                 let Some((x, lambda_x)) = solution else {
                     break 'stage (StopReason::Diverged(Divergence::SingularSystem), iteration);
                 };
+                // The rendering's mean inverse range, read at most once an iteration (by the
+                // lengthened update and the test in pixels): the reference's when there is
+                // one (`frame` is its rendering).
+                let reference_inverse_range = match (&rerender_px, &reference) {
+                    (Some(_), Some(r)) => Some(r.mean_inverse_range),
+                    _ => None,
+                };
+                let mut read_inverse_range = None;
+                let mut inverse_range = || {
+                    *read_inverse_range.get_or_insert_with(|| {
+                        reference_inverse_range.unwrap_or_else(|| mean_inverse_range(frame))
+                    })
+                };
                 let gain = self.config.gain;
                 let mut v = x.map(|c| -gain * c);
                 if let Some(cap) = extrapolate {
                     let computed = v;
-                    if let Some(last) = last_update {
-                        let inverse_range = match (&rerender_px, &reference) {
-                            (Some(_), Some(r)) => r.mean_inverse_range,
-                            _ => mean_inverse_range(frame),
-                        };
-                        if let Some(factor) = extrapolation(&v, &last, inverse_range, cap) {
-                            v = v.map(|c| c * factor);
-                        }
+                    if let Some(last) = last_update
+                        && let Some(factor) = extrapolation(&v, &last, inverse_range(), cap)
+                    {
+                        v = v.map(|c| c * factor);
                     }
                     last_update = Some(computed);
                 }
@@ -573,12 +582,6 @@ impl Servo<'_> {
                     && update_r < self.config.converged_rotation_rad
                     && lambda_dot.abs() < 1e-4)
                     || converged_px.is_some_and(|px| {
-                        // The rendering's mean inverse range: the reference's when there
-                        // is one (`frame` is its rendering).
-                        let inverse_range = || match (&rerender_px, &reference) {
-                            (Some(_), Some(r)) => r.mean_inverse_range,
-                            _ => mean_inverse_range(frame),
-                        };
                         converged_in_pixels(
                             px,
                             lambda_dot,
@@ -622,7 +625,8 @@ fn compute_feature(
 }
 
 /// `VvsConfig::extrapolate_steps`' factor for `update` after `last` (twists as
-/// computed, translation first, in consecutive camera frames): `1 / (1 − r)`, at most
+/// computed, translation first, each in the frame its iteration compared in: the camera's,
+/// or the last rendering's when warped): `1 / (1 − r)`, at most
 /// `cap`, when the update continues the last one (cosine above 0.9) and is `r` in
 /// (0.5, 1) times as long; `None` otherwise. Each twist is compared as an image motion,
 /// its translation times the rendering's mean inverse range `inverse_range_per_m`.
