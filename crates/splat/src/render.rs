@@ -315,7 +315,6 @@ impl Renderer {
     #[inline(always)]
     fn render_view(&mut self, cloud: &PointCloud, view: View, frame: &mut Frame) -> RenderStats {
         self.select_cells(cloud, &view);
-        let candidate_points: usize = self.candidates.iter().map(|c| c.cell.count as usize).sum();
 
         // The last resolve cleared the buffers, unless it did not run (a panic): then
         // cleared here.
@@ -336,7 +335,9 @@ impl Renderer {
             self.slots.prepare(runs, &self.valid_bits);
         }
         let occlusion = self.options.occlusion_culling && view.undistorted;
-        self.splats.resize(candidate_points, Splat::default());
+        // `splats` grows with what a batch may write (the kept splats and the batch's
+        // points), not to every candidate point at once: the memory a rendering
+        // touches is what it draws.
         self.draw.clear();
         let mut points_drawn = 0;
         // Splats that may add a sample, compacted at the front of `self.splats`.
@@ -365,6 +366,10 @@ impl Renderer {
                 batch_points += candidate.cell.count as usize;
             }
             let cells = &self.draw[first..];
+            if self.splats.len() < splats_kept + batch_points {
+                self.splats
+                    .resize(splats_kept + batch_points, Splat::default());
+            }
             let splats = &mut self.splats[splats_kept..splats_kept + batch_points];
             let depth = &mut self.depth[..];
             splats_kept += if runs > 1 {
