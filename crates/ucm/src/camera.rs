@@ -248,6 +248,71 @@ impl Camera {
         Ok(p.pixel_of(xd, yd))
     }
 
+    /// [`Camera::project_unbounded`] of `rotation · p + translation` (glam's `Mat3 * Vec3`,
+    /// then the translation added) for each point `p` of `points`, in `f32`, written to
+    /// `pixels` (as many as the shorter of the two), `[NaN, NaN]` where it has no pixel:
+    /// the same bits. Without lens distortion the loop has no branch, so that it
+    /// vectorises where it is inlined into code compiled for a wide instruction set
+    /// (a warp of a whole image); with it, the scalar projection point by point.
+    #[inline(always)]
+    pub fn project_transformed_unbounded(
+        &self,
+        rotation: &glam::Mat3,
+        translation: glam::Vec3,
+        points: &[[f32; 3]],
+        pixels: &mut [[f32; 2]],
+    ) {
+        let params = &self.params_f32;
+        if params.distorted {
+            for (p, out) in points.iter().zip(pixels.iter_mut()) {
+                let q = *rotation * glam::Vec3::from_array(*p) + translation;
+                *out = self
+                    .project_unbounded(q.to_array())
+                    .unwrap_or([f32::NAN; 2]);
+            }
+            return;
+        }
+        let xi = params.xi;
+        let beyond_one = xi > 1.0;
+        // Blocks of points, their coordinates transposed into arrays so that the
+        // arithmetic runs lane by lane (the last block padded with NaN points).
+        const LANES: usize = 64;
+        // The transform's and the model's numbers as locals (loads the vectoriser can
+        // hoist out of the loop).
+        let (r, t) = (*rotation, translation);
+        let params = *params;
+        for (points, pixels) in points.chunks(LANES).zip(pixels.chunks_mut(LANES)) {
+            let mut p = [[f32::NAN; LANES]; 3];
+            for (i, point) in points.iter().enumerate() {
+                for (c, &v) in point.iter().enumerate() {
+                    p[c][i] = v;
+                }
+            }
+            let mut out = [[f32::NAN; LANES]; 2];
+            for i in 0..LANES {
+                let [px, py, pz] = [p[0][i], p[1][i], p[2][i]];
+                // glam's `Mat3 * Vec3` (column by column), then the translation.
+                let x = r.x_axis.x * px + r.y_axis.x * py + r.z_axis.x * pz + t.x;
+                let y = r.x_axis.y * px + r.y_axis.y * py + r.z_axis.y * pz + t.y;
+                let z = r.x_axis.z * px + r.y_axis.z * py + r.z_axis.z * pz + t.z;
+                // `model::project_normalized`'s operations and tests, without a branch.
+                let rho = (x * x + y * y + z * z).sqrt();
+                let d = z + xi * rho;
+                // (`rho < ∞` as `is_finite`: `rho` is a square root, never below 0.)
+                let seen = (rho > 0.0)
+                    & (rho < f32::INFINITY)
+                    & (d > 0.0)
+                    & (!beyond_one | (xi * z + rho > 0.0));
+                let [u, v] = params.pixel_of(x / d, y / d);
+                out[0][i] = if seen { u } else { f32::NAN };
+                out[1][i] = if seen { v } else { f32::NAN };
+            }
+            for (i, pixel) in pixels.iter_mut().enumerate() {
+                *pixel = [out[0][i], out[1][i]];
+            }
+        }
+    }
+
     /// Projection of a point of the camera frame to its pixel `(u, v)`, with the reason
     /// when it is not seen: behind the viewpoint, outside the ξ > 1 domain, outside the
     /// image, outside the valid region.

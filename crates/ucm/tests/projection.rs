@@ -364,3 +364,37 @@ fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
         "{moved:?}"
     );
 }
+
+proptest! {
+    /// The batch projection of transformed points gives `project_unbounded`'s bits, NaN
+    /// where it has none: points anywhere (behind the camera, at its centre, NaN), with
+    /// and without lens distortion, ξ on both sides of 1, a block's tail.
+    #[test]
+    fn the_batch_projection_is_project_unbounded_bit_for_bit(
+        camera in prop_oneof![camera_strategy(false), camera_strategy(true)],
+        points in prop::collection::vec(prop::array::uniform3(-20.0..20.0f32), 0..150),
+        specials in prop::collection::vec(0usize..150, 0..4),
+        rotation in prop::array::uniform3(-3.0..3.0f32),
+        translation in prop::array::uniform3(-2.0..2.0f32),
+    ) {
+        let mut points = points;
+        for (k, &at) in specials.iter().enumerate() {
+            if let Some(p) = points.get_mut(at) {
+                *p = [[f32::NAN, 0.0, 1.0], [0.0; 3], [0.0, 0.0, -1.0], [f32::INFINITY, 0.0, 1.0]][k];
+            }
+        }
+        let rotation = glam::Mat3::from_quat(glam::Quat::from_scaled_axis(glam::Vec3::from_array(rotation)));
+        let translation = glam::Vec3::from_array(translation);
+        let mut pixels = vec![[0.0f32; 2]; points.len()];
+        camera.project_transformed_unbounded(&rotation, translation, &points, &mut pixels);
+        for (p, pixel) in points.iter().zip(&pixels) {
+            let q = rotation * glam::Vec3::from_array(*p) + translation;
+            match camera.project_unbounded(q.to_array()) {
+                Ok(expected) => prop_assert_eq!(
+                    pixel.map(f32::to_bits), expected.map(f32::to_bits), "{:?}", p
+                ),
+                Err(_) => prop_assert!(pixel[0].is_nan() && pixel[1].is_nan(), "{:?}: {:?}", p, pixel),
+            }
+        }
+    }
+}

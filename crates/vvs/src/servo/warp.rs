@@ -81,18 +81,19 @@ pub(crate) fn lift(frame: &Frame, rays: &[[f32; 3]], points: &mut [[f32; 3]]) {
         .zip(&frame.range_m)
         .zip(rays)
     {
-        *p = if status == PixelStatus::Hit && range_m > 0.0 && range_m.is_finite() {
-            d.map(|c| c * range_m)
-        } else {
-            [f32::NAN; 3]
-        };
+        // Without a branch (a NaN range makes the point NaN), so that the loop streams.
+        let seen = (status == PixelStatus::Hit) & (range_m > 0.0) & (range_m < f32::INFINITY);
+        let range_m = if seen { range_m } else { f32::NAN };
+        *p = d.map(|c| c * range_m);
     }
 }
 
 /// `picture` seen from the rendering whose points are `points`: pixel `k` of `out`
 /// takes the picture bilinearly at `π(camera_from_reference X_k)`, valid where `X_k` is
 /// known, projects inside the picture and its four neighbours lie in the camera's valid
-/// region and hold an intensity.
+/// region and hold an intensity. Compiled for the widest instruction set found at run
+/// time: the points are projected a block at a time
+/// ([`Camera::project_transformed_unbounded`], vectorised; the same bits), then sampled.
 pub(crate) fn warp(
     camera: &Camera,
     points: &[[f32; 3]],
@@ -100,45 +101,85 @@ pub(crate) fn warp(
     picture: &impl AnyImage,
     out: &mut Image,
 ) {
-    let rotation = Mat3::from_quat(camera_from_reference.rotation.as_quat());
-    let translation = camera_from_reference.translation.as_vec3();
     let (w, h) = (picture.width() as usize, picture.height() as usize);
     if w < 2 || h < 2 {
         out.valid.fill(false);
         return;
     }
-    let intensity = picture.intensity();
-    let region = camera.valid_pixels();
-    for ((o, valid), p) in out
-        .intensity
-        .iter_mut()
-        .zip(out.valid.iter_mut())
-        .zip(points)
-    {
-        *o = 0.0;
-        *valid = false;
-        if p[0].is_nan() {
-            continue;
+    isa::arch().dispatch(Warp {
+        camera,
+        points,
+        rotation: Mat3::from_quat(camera_from_reference.rotation.as_quat()),
+        translation: camera_from_reference.translation.as_vec3(),
+        picture,
+        out,
+    });
+}
+
+/// Points projected at once before they are sampled (a block's pixels stay in the
+/// first level of cache).
+const WARP_BLOCK: usize = 64;
+
+/// [`warp`]'s arguments, as a `pulp` kernel (only what is inlined into `with_simd` is
+/// compiled for its instruction set).
+struct Warp<'a, P> {
+    camera: &'a Camera,
+    points: &'a [[f32; 3]],
+    rotation: Mat3,
+    translation: Vec3,
+    picture: &'a P,
+    out: &'a mut Image,
+}
+
+impl<P: AnyImage> pulp::WithSimd for Warp<'_, P> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let Warp {
+            camera,
+            points,
+            rotation,
+            translation,
+            picture,
+            out,
+        } = self;
+        let (w, h) = (picture.width() as usize, picture.height() as usize);
+        let intensity = picture.intensity();
+        let region = camera.valid_pixels();
+        let usable = |c: usize| region[c] && picture.is_observed(c);
+        let mut pixels = [[0.0f32; 2]; WARP_BLOCK];
+        let blocks = out
+            .intensity
+            .chunks_mut(WARP_BLOCK)
+            .zip(out.valid.chunks_mut(WARP_BLOCK))
+            .zip(points.chunks(WARP_BLOCK));
+        for ((out, valid), points) in blocks {
+            camera.project_transformed_unbounded(&rotation, translation, points, &mut pixels);
+            for (((o, valid), &[u, v]), _) in out.iter_mut().zip(valid).zip(&pixels).zip(points) {
+                *o = 0.0;
+                *valid = false;
+                // The four pixels around (u, v): pixel (i, j) is centred at (i, j)
+                // (non-negative coordinates truncate to their floor; NaN fails).
+                if !(u >= 0.0 && v >= 0.0 && u < (w - 1) as f32 && v < (h - 1) as f32) {
+                    continue;
+                }
+                let (x0, y0) = (u as usize, v as usize);
+                let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+                let k = y0 * w + x0;
+                if !(usable(k) && usable(k + 1) && usable(k + w) && usable(k + w + 1)) {
+                    continue;
+                }
+                let (a, b, c, d) = (
+                    intensity[k],
+                    intensity[k + 1],
+                    intensity[k + w],
+                    intensity[k + w + 1],
+                );
+                *o = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
+                *valid = true;
+            }
         }
-        let q = rotation * Vec3::from_array(*p) + translation;
-        let Ok([u, v]) = camera.project_unbounded(q.to_array()) else {
-            continue;
-        };
-        // The four pixels around (u, v): pixel (i, j) is centred at (i, j) (non-negative
-        // coordinates truncate to their floor).
-        if !(u >= 0.0 && v >= 0.0 && u < (w - 1) as f32 && v < (h - 1) as f32) {
-            continue;
-        }
-        let (x0, y0) = (u as usize, v as usize);
-        let (fx, fy) = (u - x0 as f32, v - y0 as f32);
-        let k = y0 * w + x0;
-        let corners = [k, k + 1, k + w, k + w + 1];
-        if !corners.iter().all(|&c| region[c] && picture.is_observed(c)) {
-            continue;
-        }
-        let [a, b, c, d] = corners.map(|c| intensity[c]);
-        *o = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
-        *valid = true;
     }
 }
 
