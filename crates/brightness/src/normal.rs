@@ -4,8 +4,9 @@
 //! blocks keep the inner loop fast, the `f64` sums keep the precision of long sums.
 //! On AVX-512 (found at run time through `pulp`) one row's products of the upper
 //! triangle of `JᵀJ` and of `Jᵀe` are formed together, sixteen per instruction (each
-//! sum in its own lane, the rows added in order): the same operations in the same
-//! order as the plain loop, hence the same bits (tested).
+//! sum in its own lane, the rows added in order); on AVX2, eight per instruction (rows
+//! of at most eight columns): the same operations in the same order as the plain
+//! loop, hence the same bits (tested).
 
 /// Rows summed in `f32` before their sums are added in `f64`.
 const BLOCK: usize = 256;
@@ -52,6 +53,10 @@ trait Rows<const M: usize>: Copy {
     /// Row `k` in the first `M` lanes of a vector (anything beyond).
     #[cfg(target_arch = "x86_64")]
     fn lanes(&self, simd: pulp::x86::V4, k: usize) -> core::arch::x86_64::__m512;
+
+    /// Row `k` in the first `M` lanes of an AVX2 vector (`M ≤ 8`; anything beyond).
+    #[cfg(target_arch = "x86_64")]
+    fn lanes8(&self, simd: pulp::x86::V3, k: usize) -> core::arch::x86_64::__m256;
 }
 
 /// Rows as they are.
@@ -77,6 +82,19 @@ impl<const M: usize> Rows<M> for Plain<'_, M> {
             Some(s) => pulp::cast(*<&[f32; 16]>::try_from(s).expect("16")),
             None => {
                 let mut padded = [0.0f32; 16];
+                padded[..M].copy_from_slice(&self.0[k]);
+                pulp::cast(padded)
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn lanes8(&self, _: pulp::x86::V3, k: usize) -> core::arch::x86_64::__m256 {
+        match self.0.as_flattened().get(k * M..k * M + 8) {
+            Some(s) => pulp::cast(*<&[f32; 8]>::try_from(s).expect("8")),
+            None => {
+                let mut padded = [0.0f32; 8];
                 padded[..M].copy_from_slice(&self.0[k]);
                 pulp::cast(padded)
             }
@@ -115,6 +133,24 @@ impl<const N: usize, const M: usize> Rows<M> for WithColumn<'_, N> {
         let f = simd.avx512f;
         f._mm512_mask_blend_ps(1 << N, row, f._mm512_set1_ps(self.column[k]))
     }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn lanes8(&self, simd: pulp::x86::V3, k: usize) -> core::arch::x86_64::__m256 {
+        let row: core::arch::x86_64::__m256 = Plain(self.rows).lanes8(simd, k);
+        let column = simd.avx._mm256_set1_ps(self.column[k]);
+        // Lane N from the column: a blend's mask is a constant, so it is chosen by N.
+        match N {
+            0 => simd.avx._mm256_blend_ps::<0b0000_0001>(row, column),
+            1 => simd.avx._mm256_blend_ps::<0b0000_0010>(row, column),
+            2 => simd.avx._mm256_blend_ps::<0b0000_0100>(row, column),
+            3 => simd.avx._mm256_blend_ps::<0b0000_1000>(row, column),
+            4 => simd.avx._mm256_blend_ps::<0b0001_0000>(row, column),
+            5 => simd.avx._mm256_blend_ps::<0b0010_0000>(row, column),
+            6 => simd.avx._mm256_blend_ps::<0b0100_0000>(row, column),
+            _ => simd.avx._mm256_blend_ps::<0b1000_0000>(row, column),
+        }
+    }
 }
 
 /// [`normal_equations`] of any rows: the AVX-512 kernel where the processor has it.
@@ -128,18 +164,33 @@ fn run<const M: usize>(
         assert_eq!(w.len(), rows.len());
     }
     #[cfg(target_arch = "x86_64")]
-    if M <= avx512::MAX_COLUMNS
-        && let Some(simd) = isa::avx512()
     {
-        return pulp::Simd::vectorize(
-            simd,
-            avx512::Normal {
+        if M <= avx512::MAX_COLUMNS
+            && let Some(simd) = isa::avx512()
+        {
+            return pulp::Simd::vectorize(
                 simd,
-                rows,
-                residuals,
-                weights,
-            },
-        );
+                avx512::Normal {
+                    simd,
+                    rows,
+                    residuals,
+                    weights,
+                },
+            );
+        }
+        if M <= avx2::MAX_COLUMNS
+            && let Some(simd) = pulp::x86::V3::try_new()
+        {
+            return pulp::Simd::vectorize(
+                simd,
+                avx2::Normal {
+                    simd,
+                    rows,
+                    residuals,
+                    weights,
+                },
+            );
+        }
     }
     scalar(rows, residuals, weights)
 }
@@ -336,6 +387,120 @@ mod avx512 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    //! The AVX2 kernel: per row, lane `p` of the first vectors holds one product
+    //! `(r, c)`, `r ≤ c`, of `JᵀJ` (its factors permuted from `w·row` and `row`), and
+    //! lane `r` of the last one the product `r` of `Jᵀe` (`row · e`).
+
+    use pulp::x86::V3;
+
+    use super::{BLOCK, Rows, Sums};
+
+    /// Vectors of `JᵀJ` sums.
+    const VECTORS: usize = 5;
+
+    /// The widest rows handled: a row in one vector, `N (N + 1)/2` sums in
+    /// `8 · VECTORS` lanes.
+    pub(super) const MAX_COLUMNS: usize = 8;
+
+    /// Which product each lane of the `JᵀJ` vectors sums: the permute indices of its
+    /// factors (`x` from `w·row`, `y` from `row`), and where its sum goes.
+    struct Lanes {
+        x: [[i32; 8]; VECTORS],
+        y: [[i32; 8]; VECTORS],
+        target: [(usize, usize); 8 * VECTORS],
+        count: usize,
+    }
+
+    /// The lanes of rows of `n` columns (none beyond `MAX_COLUMNS`: wider rows never
+    /// run here, but every width is compiled).
+    const fn lanes(n: usize) -> Lanes {
+        let mut l = Lanes {
+            x: [[0; 8]; VECTORS],
+            y: [[0; 8]; VECTORS],
+            target: [(0, 0); 8 * VECTORS],
+            count: 0,
+        };
+        if n > MAX_COLUMNS {
+            return l;
+        }
+        let mut r = 0;
+        while r < n {
+            let mut c = r;
+            while c < n {
+                // block[r][c] += (row[r] · w) · row[c]
+                let p = l.count;
+                l.x[p / 8][p % 8] = r as i32;
+                l.y[p / 8][p % 8] = c as i32;
+                l.target[p] = (r, c);
+                l.count += 1;
+                c += 1;
+            }
+            r += 1;
+        }
+        l
+    }
+
+    /// The arguments of [`super::normal_equations`], run compiled for AVX2.
+    pub(super) struct Normal<'a, R, const N: usize> {
+        pub(super) simd: V3,
+        pub(super) rows: R,
+        pub(super) residuals: &'a [f32],
+        pub(super) weights: Option<&'a [f32]>,
+    }
+
+    impl<const N: usize, R: Rows<N>> pulp::WithSimd for Normal<'_, R, N> {
+        type Output = ([[f64; N]; N], [f64; N]);
+
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
+            self.run()
+        }
+    }
+
+    impl<const N: usize, R: Rows<N>> Normal<'_, R, N> {
+        #[inline(always)]
+        fn run(self) -> ([[f64; N]; N], [f64; N]) {
+            let lanes = const { lanes(N) };
+            let vectors = lanes.count.div_ceil(8);
+            let (avx, avx2) = (self.simd.avx, self.simd.avx2);
+            let mut sums = Sums::<N>::default();
+            let m = self.rows.len();
+            for b in 0..m.div_ceil(BLOCK) {
+                let mut acc = [avx._mm256_setzero_ps(); VECTORS];
+                let mut acc_e = avx._mm256_setzero_ps();
+                for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
+                    let w = self.weights.map_or(1.0, |w| w[k]);
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let e = self.residuals[k] * w;
+                    // The row in the first N lanes.
+                    let row = self.rows.lanes8(self.simd, k);
+                    let weighted = avx._mm256_mul_ps(row, avx._mm256_set1_ps(w));
+                    for (v, acc) in acc.iter_mut().enumerate().take(vectors) {
+                        let x = avx2._mm256_permutevar8x32_ps(weighted, pulp::cast(lanes.x[v]));
+                        let y = avx2._mm256_permutevar8x32_ps(row, pulp::cast(lanes.y[v]));
+                        *acc = avx._mm256_add_ps(*acc, avx._mm256_mul_ps(x, y));
+                    }
+                    acc_e = avx._mm256_add_ps(acc_e, avx._mm256_mul_ps(row, avx._mm256_set1_ps(e)));
+                }
+                let all: [[f32; 8]; VECTORS] = pulp::cast(acc);
+                let all = all.as_flattened();
+                let mut block = [[0.0f32; N]; N];
+                for (&sum, &(r, c)) in all.iter().zip(&lanes.target[..lanes.count]) {
+                    block[r][c] = sum;
+                }
+                let e: [f32; 8] = pulp::cast(acc_e);
+                let block_e: [f32; N] = std::array::from_fn(|r| e[r]);
+                sums.add_block(&block, &block_e);
+            }
+            sums.finish()
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use proptest::prelude::*;
@@ -400,8 +565,62 @@ mod tests {
                 let got = normal_equations_with_column::<6, 7>(&rows, &column, &residuals, weights);
                 prop_assert_eq!(bits(got), expected.clone());
                 let plain = scalar::<7>(WithColumn { rows: &rows, column: &column }, &residuals, weights);
-                prop_assert_eq!(bits(plain), expected);
+                prop_assert_eq!(bits(plain), expected.clone());
+                if let Some(got) = on_avx2::<7>(WithColumn { rows: &rows, column: &column }, &residuals, weights) {
+                    prop_assert_eq!(bits(got), expected);
+                }
             }
         }
+
+        /// The AVX2 kernel (where the processor has it, whatever the widest one) gives
+        /// the bits of the plain loops, for every width it takes, with dropped rows.
+        #[test]
+        fn the_avx2_kernel_gives_the_bits_of_the_plain_loops(
+            values in prop::collection::vec(-1e3f32..1e3, 0..5400),
+            weights in prop::collection::vec(
+                prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..2.0], 600),
+        ) {
+            fn check<const N: usize>(values: &[f32], weights: &[f32]) -> Result<(), TestCaseError> {
+                let m = values.len() / (N + 1);
+                let rows: Vec<[f32; N]> = (0..m)
+                    .map(|k| std::array::from_fn(|c| values[k * (N + 1) + c]))
+                    .collect();
+                let residuals: Vec<f32> = (0..m).map(|k| values[k * (N + 1) + N]).collect();
+                for weights in [None, Some(&weights[..m])] {
+                    let reference = scalar::<N>(Plain(&rows), &residuals, weights);
+                    if let Some(got) = on_avx2(Plain(&rows), &residuals, weights) {
+                        prop_assert_eq!(bits(got), bits(reference), "N = {}", N);
+                    }
+                }
+                Ok(())
+            }
+            check::<1>(&values[..values.len().min(2 * 600)], &weights)?;
+            check::<2>(&values[..values.len().min(3 * 600)], &weights)?;
+            check::<6>(&values[..values.len().min(7 * 600)], &weights)?;
+            check::<7>(&values[..values.len().min(8 * 600)], &weights)?;
+            check::<8>(&values[..values.len().min(9 * 600)], &weights)?;
+        }
+    }
+
+    /// The AVX2 kernel's sums, if the processor has AVX2.
+    fn on_avx2<const N: usize>(
+        rows: impl Rows<N>,
+        residuals: &[f32],
+        weights: Option<&[f32]>,
+    ) -> Option<([[f64; N]; N], [f64; N])> {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            return Some(pulp::Simd::vectorize(
+                simd,
+                avx2::Normal {
+                    simd,
+                    rows,
+                    residuals,
+                    weights,
+                },
+            ));
+        }
+        let _ = (rows, residuals, weights);
+        None
     }
 }
