@@ -250,12 +250,18 @@ impl Brightness {
         }
         // The gradient and the rows are those of the edge of the support, below.
         self.checked_pixels(rendering, false)?;
-        self.edge_of_support(against);
+        // Compiled for the widest instruction set found at run time (the same
+        // operations: the same bits).
+        isa::arch().dispatch(EdgeOfSupport {
+            brightness: self,
+            against,
+        });
         Ok(())
     }
 
     /// The interaction rows of [`Brightness::compute_against`], after
     /// [`Brightness::compute_image`] of the rendering on the compared pixels.
+    #[inline(always)]
     fn edge_of_support(&mut self, against: Against<'_>) {
         let (w, h, n) = (
             self.tables.width,
@@ -281,17 +287,22 @@ impl Brightness {
             &self.against_observed,
             &mut self.compared_gradient,
         );
+        // `∇(H R) − P ∇H` inside the picture's observed pixels, 0 outside, without a
+        // branch (so that the loop vectorises).
+        let pixels = self
+            .gradient
+            .iter_mut()
+            .zip(&self.compared_gradient)
+            .zip(against.intensity.iter().zip(&self.against_observed));
+        for ((g, &[hu, hv]), (&p, &inside)) in pixels {
+            let edge = [g[0] - p * hu, g[1] - p * hv];
+            *g = if inside { edge } else { [0.0; 2] };
+        }
+        // Outside the compared pixels, next to them: the edge's inverse range (read
+        // from compared pixels only, which this does not write: in any order).
         for k in 0..n {
-            if !self.against_observed[k] {
-                self.gradient[k] = [0.0; 2];
-                continue;
-            }
-            let p = against.intensity[k];
             let [hu, hv] = self.compared_gradient[k];
-            self.gradient[k][0] -= p * hu;
-            self.gradient[k][1] -= p * hv;
-            // Outside the compared pixels, next to them: the edge's inverse range.
-            if !self.observed[k] && (hu != 0.0 || hv != 0.0) {
+            if self.against_observed[k] && !self.observed[k] && (hu != 0.0 || hv != 0.0) {
                 let (x, y) = (k % w, k / w);
                 let (mut sum, mut count) = (0.0f32, 0u32);
                 for (nx, ny) in [
@@ -524,6 +535,21 @@ struct Pixels<'a, P> {
     brightness: &'a mut Brightness,
     picture: &'a P,
     derivatives: bool,
+}
+
+/// [`Brightness::edge_of_support`] as a `pulp` kernel.
+struct EdgeOfSupport<'a> {
+    brightness: &'a mut Brightness,
+    against: Against<'a>,
+}
+
+impl pulp::WithSimd for EdgeOfSupport<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.brightness.edge_of_support(self.against);
+    }
 }
 
 impl<P: AnyImage> pulp::WithSimd for Pixels<'_, P> {

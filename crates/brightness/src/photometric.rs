@@ -79,10 +79,31 @@ pub(crate) fn rows(run: Run<'_>) {
         scalar(tail);
         return;
     }
+    // Elsewhere the plain loop, compiled for AVX2 where the processor has it (the same
+    // operations: the same bits).
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        pulp::Simd::vectorize(simd, Plain(run));
+        return;
+    }
     scalar(run);
 }
 
+/// [`scalar`] as a `pulp` kernel (only what is inlined into `with_simd` is compiled for
+/// its instruction set).
+struct Plain<'a>(Run<'a>);
+
+impl pulp::WithSimd for Plain<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        scalar(self.0);
+    }
+}
+
 /// The plain loop (the reference of the vector kernel, and its fallback).
+#[inline(always)]
 fn scalar(run: Run<'_>) {
     let pixels = run
         .out

@@ -177,8 +177,11 @@ impl Frame {
                 expected: self.range_m.len(),
             });
         }
+        // Without a branch (every pixel's quotient taken, kept or not), so that the
+        // loop vectorises.
         for ((o, &r), &s) in out.iter_mut().zip(&self.range_m).zip(&self.status) {
-            *o = if s == PixelStatus::Hit { 1.0 / r } else { 0.0 };
+            let inverse = 1.0 / r;
+            *o = if s == PixelStatus::Hit { inverse } else { 0.0 };
         }
         Ok(())
     }

@@ -74,12 +74,11 @@ impl<P: AnyImage> AnyImage for Restricted<'_, P> {
     }
 
     /// The picture's inverse ranges, 0 outside the support.
+    #[inline]
     fn inverse_range(&self, out: &mut [f32]) -> Result<(), FrameError> {
         self.picture.inverse_range(out)?;
         for (o, &s) in out.iter_mut().zip(self.support) {
-            if !s {
-                *o = 0.0;
-            }
+            *o = if s { *o } else { 0.0 };
         }
         Ok(())
     }
