@@ -63,7 +63,7 @@
 //! them) skip the square loops, and the passes take minima and add samples without a
 //! branch (whether a point is nearer is unpredictable), on plain integers (each thread
 //! of a parallel rendering on buffers of its own, merged between batches, `slots`):
-//! on AVX-512, a 3 × 3 splat (most of the others) takes its minima, and adds
+//! on AVX-512 and on AVX2, a 3 × 3 splat (most of the others) takes its minima, and adds
 //! its samples, a row of three pixels per instruction. Each point's
 //! splat is bit for bit the one of the scalar reference (tested, both kernels). A
 //! splat whose every pixel already holds a range below its depth band when pass 1

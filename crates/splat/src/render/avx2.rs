@@ -212,3 +212,81 @@ pub(super) fn project_splats(
         }
     }
 }
+
+/// `_CMP_GE_OQ` (false where either is a NaN, as Rust's `>=`) and `_CMP_NLT_UQ` (true
+/// where either is a NaN, as Rust's `!(a < b)`).
+const GE: i32 = 29;
+const NLT: i32 = 21;
+
+/// Four keys from `depth` at `k` (the caller checked `k + 4 ≤ len`).
+#[inline(always)]
+fn four(depth: &[u32], k: usize) -> [u32; 4] {
+    *<&[u32; 4]>::try_from(&depth[k..k + 4]).expect("four keys")
+}
+
+/// Pass 1 of a 3 × 3 splat whose top-left pixel is `first` (rows `width` apart; the
+/// caller checked that four pixels from its last row's first are in `depth`): each
+/// row's three keys take their minimum with `key` in one instruction, the fourth its
+/// minimum with the largest key (written back as it was). Returns whether a pixel held
+/// a range not below `limit` before (a NaN, an empty pixel, counts):
+/// `pass_one::splat_depth`'s result.
+#[inline(always)]
+pub(super) fn depth_3x3(
+    simd: V3,
+    depth: &mut [u32],
+    first: usize,
+    width: usize,
+    key: u32,
+    limit: f32,
+) -> bool {
+    use core::arch::x86_64::{__m128, __m128i};
+    let (sse41, avx) = (simd.sse4_1, simd.avx);
+    let keys: __m128i = pulp::cast([key, key, key, u32::MAX]);
+    let limits: __m128 = pulp::cast([limit; 4]);
+    let mut seen = 0;
+    for row in [first, first + width, first + 2 * width] {
+        let before: __m128i = pulp::cast(four(depth, row));
+        let after = sse41._mm_min_epu32(before, keys);
+        *<&mut [u32; 4]>::try_from(&mut depth[row..row + 4]).expect("four keys") =
+            pulp::cast(after);
+        seen |= simd
+            .sse
+            ._mm_movemask_ps(avx._mm_cmp_ps::<NLT>(pulp::cast(before), limits));
+    }
+    seen & 0b111 != 0
+}
+
+/// Pass 2 of a 3 × 3 splat (as [`depth_3x3`]): each row's three pixels whose key is
+/// at least `limit` add `sample` and `range_sample` to their two sums, in two additions
+/// of four 64-bit lanes whose samples are masked (the fourth pixel adds zero).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn accumulate_3x3(
+    simd: V3,
+    depth: &[u32],
+    accum: &mut [[u64; 2]],
+    first: usize,
+    width: usize,
+    limit: f32,
+    sample: u64,
+    range_sample: u64,
+) {
+    use core::arch::x86_64::{__m128, __m128i};
+    let (sse2, avx, avx2) = (simd.sse2, simd.avx, simd.avx2);
+    let samples: __m256i = pulp::cast([sample, range_sample, sample, range_sample]);
+    let limits: __m128 = pulp::cast([limit; 4]);
+    let three: __m128i = pulp::cast([-1i32, -1, -1, 0]);
+    for row in [first, first + width, first + 2 * width] {
+        let near = avx._mm_cmp_ps::<GE>(pulp::cast(four(depth, row)), limits);
+        let near = sse2._mm_and_si128(pulp::cast(near), three);
+        // Each pixel's mask over its two sums (32-bit lanes sign-extended to 64).
+        let low = avx2._mm256_cvtepi32_epi64(sse2._mm_unpacklo_epi32(near, near));
+        let high = avx2._mm256_cvtepi32_epi64(sse2._mm_unpackhi_epi32(near, near));
+        let sums = <&mut [[u64; 2]; 4]>::try_from(&mut accum[row..row + 4]).expect("four");
+        let [a, b]: [__m256i; 2] = pulp::cast(*sums);
+        *sums = pulp::cast([
+            avx2._mm256_add_epi64(a, avx2._mm256_and_si256(samples, low)),
+            avx2._mm256_add_epi64(b, avx2._mm256_and_si256(samples, high)),
+        ]);
+    }
+}

@@ -205,6 +205,41 @@ impl Project for Avx2 {
     fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<8>(self, points, footprint, view, out);
     }
+
+    #[inline(always)]
+    fn depth_3x3(
+        self,
+        depth: &mut [u32],
+        first: usize,
+        width: usize,
+        key: u32,
+        limit: f32,
+    ) -> bool {
+        avx2::depth_3x3(self.0, depth, first, width, key, limit)
+    }
+
+    #[inline(always)]
+    fn accumulate_3x3(
+        self,
+        depth: &[u32],
+        accum: &mut [[u64; 2]],
+        first: usize,
+        width: usize,
+        limit: f32,
+        sample: u64,
+        range_sample: u64,
+    ) {
+        avx2::accumulate_3x3(
+            self.0,
+            depth,
+            accum,
+            first,
+            width,
+            limit,
+            sample,
+            range_sample,
+        );
+    }
 }
 
 #[cfg(test)]
@@ -255,8 +290,8 @@ mod tests {
         /// The plain loops of the 3 × 3 kernels are the per-pixel passes: each pixel
         /// takes the minimum key, the splat is seen if a pixel held a key not below the
         /// limit (or none), and each pixel at least the limit adds both samples; the
-        /// AVX-512 kernels (where the processor has them) give the same buffers, the
-        /// fourth pixel of each row and every other pixel untouched.
+        /// AVX-512 and AVX2 kernels (where the processor has them) give the same
+        /// buffers, the fourth pixel of each row and every other pixel untouched.
         #[test]
         fn kernels_3x3_are_the_per_pixel_passes(
             width in 4usize..24,
@@ -299,6 +334,10 @@ mod tests {
             #[cfg(target_arch = "x86_64")]
             if let Some(simd) = pulp::x86::V4::try_new() {
                 same_3x3(Avx512(simd), &depth, &accum, first, width, key, limit, samples)?;
+            }
+            #[cfg(target_arch = "x86_64")]
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                same_3x3(Avx2(simd), &depth, &accum, first, width, key, limit, samples)?;
             }
         }
     }
