@@ -11,6 +11,7 @@ use core::arch::x86_64::{__m256, __m256i};
 
 use pulp::x86::V3;
 
+use super::avx512::{GE, NLT, four};
 use super::lanes::{Constants, Vectors, splat_words, unpack};
 use super::splat::Splat;
 use super::view::View;
@@ -211,17 +212,6 @@ pub(super) fn project_splats(
             *out = Splat(*word);
         }
     }
-}
-
-/// `_CMP_GE_OQ` (false where either is a NaN, as Rust's `>=`) and `_CMP_NLT_UQ` (true
-/// where either is a NaN, as Rust's `!(a < b)`).
-const GE: i32 = 29;
-const NLT: i32 = 21;
-
-/// Four keys from `depth` at `k` (the caller checked `k + 4 ≤ len`).
-#[inline(always)]
-fn four(depth: &[u32], k: usize) -> [u32; 4] {
-    *<&[u32; 4]>::try_from(&depth[k..k + 4]).expect("four keys")
 }
 
 /// Pass 1 of a 3 × 3 splat whose top-left pixel is `first` (rows `width` apart; the

@@ -203,9 +203,9 @@ pub(super) fn project_splats(
 }
 
 /// `_CMP_GE_OQ` (false where either is a NaN, as Rust's `>=`) and `_CMP_NLT_UQ` (true
-/// where either is a NaN, as Rust's `!(a < b)`).
-const GE: i32 = 29;
-const NLT: i32 = 21;
+/// where either is a NaN, as Rust's `!(a < b)`); the AVX2 kernels' too.
+pub(super) const GE: i32 = 29;
+pub(super) const NLT: i32 = 21;
 
 /// Each of the low four bits of a mask spread over two bits (a pixel's two sums).
 const PAIRS: [u8; 8] = [
@@ -214,7 +214,7 @@ const PAIRS: [u8; 8] = [
 
 /// Four keys from `depth` at `k` (the caller checked `k + 4 ≤ len`).
 #[inline(always)]
-fn four(depth: &[u32], k: usize) -> [u32; 4] {
+pub(super) fn four(depth: &[u32], k: usize) -> [u32; 4] {
     *<&[u32; 4]>::try_from(&depth[k..k + 4]).expect("four keys")
 }
 
