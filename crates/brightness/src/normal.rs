@@ -153,7 +153,8 @@ impl<const N: usize, const M: usize> Rows<M> for WithColumn<'_, N> {
     }
 }
 
-/// [`normal_equations`] of any rows: the AVX-512 kernel where the processor has it.
+/// [`normal_equations`] of any rows: the AVX-512 kernel where the processor has it, else
+/// the AVX2 one (rows of at most eight columns), else the plain loops.
 fn run<const M: usize>(
     rows: impl Rows<M>,
     residuals: &[f32],
@@ -530,7 +531,7 @@ mod tests {
     }
 
     proptest! {
-        /// The kernel of the processor (AVX-512 here) gives the bits of the plain loops,
+        /// The widest kernel of the processor gives the bits of the plain loops,
         /// for the widths the servo uses, over several blocks, with dropped rows.
         #[test]
         fn every_kernel_gives_the_bits_of_the_plain_loops(

@@ -307,7 +307,7 @@ impl Camera {
                 out[0][i] = if seen { u } else { f32::NAN };
                 out[1][i] = if seen { v } else { f32::NAN };
             }
-            for (i, pixel) in pixels.iter_mut().enumerate() {
+            for (i, (pixel, _)) in pixels.iter_mut().zip(points).enumerate() {
                 *pixel = [out[0][i], out[1][i]];
             }
         }

@@ -385,16 +385,25 @@ proptest! {
         }
         let rotation = glam::Mat3::from_quat(glam::Quat::from_scaled_axis(glam::Vec3::from_array(rotation)));
         let translation = glam::Vec3::from_array(translation);
-        let mut pixels = vec![[0.0f32; 2]; points.len()];
-        camera.project_transformed_unbounded(&rotation, translation, &points, &mut pixels);
-        for (p, pixel) in points.iter().zip(&pixels) {
-            let q = rotation * glam::Vec3::from_array(*p) + translation;
-            match camera.project_unbounded(q.to_array()) {
-                Ok(expected) => prop_assert_eq!(
-                    pixel.map(f32::to_bits), expected.map(f32::to_bits), "{:?}", p
-                ),
-                Err(_) => prop_assert!(pixel[0].is_nan() && pixel[1].is_nan(), "{:?}: {:?}", p, pixel),
+        // The transform, and the identity (so that the special points reach the camera
+        // as they are: at its centre, behind it), with pixels to spare.
+        for (rotation, translation) in [(rotation, translation), (glam::Mat3::IDENTITY, glam::Vec3::ZERO)] {
+            let mut pixels = vec![[7.0f32; 2]; points.len() + 3];
+            camera.project_transformed_unbounded(&rotation, translation, &points, &mut pixels);
+            for (p, pixel) in points.iter().zip(&pixels) {
+                let q = rotation * glam::Vec3::from_array(*p) + translation;
+                match camera.project_unbounded(q.to_array()) {
+                    Ok(expected) => prop_assert_eq!(
+                        pixel.map(f32::to_bits), expected.map(f32::to_bits), "{:?}", p
+                    ),
+                    Err(_) => prop_assert!(pixel[0].is_nan() && pixel[1].is_nan(), "{:?}: {:?}", p, pixel),
+                }
             }
+            // Only as many pixels as points are written; fewer pixels, fewer points.
+            prop_assert!(pixels[points.len()..].iter().all(|&p| p == [7.0; 2]));
+            let mut fewer = vec![[7.0f32; 2]; points.len() / 2];
+            camera.project_transformed_unbounded(&rotation, translation, &points, &mut fewer);
+            prop_assert!(fewer.iter().zip(&pixels).all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
         }
     }
 }
