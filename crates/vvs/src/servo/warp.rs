@@ -156,7 +156,8 @@ impl<P: AnyImage> pulp::WithSimd for Warp<'_, P> {
             .zip(points.chunks(WARP_BLOCK));
         for ((out, valid), points) in blocks {
             camera.project_transformed_unbounded(&rotation, translation, points, &mut pixels);
-            for (((o, valid), &[u, v]), _) in out.iter_mut().zip(valid).zip(&pixels).zip(points) {
+            let pixels = &pixels[..points.len()];
+            for ((o, valid), &[u, v]) in out.iter_mut().zip(valid).zip(pixels) {
                 *o = 0.0;
                 *valid = false;
                 // The four pixels around (u, v): pixel (i, j) is centred at (i, j)
@@ -204,6 +205,77 @@ mod tests {
         let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &intensities, None, None)
             .expect("a valid cloud");
         (cloud, camera)
+    }
+
+    /// The warp is its definition, point by point (`project_unbounded`, then the
+    /// bilinear sample where the four neighbours are usable), to the bit: with the
+    /// fixture camera and with the same camera given a lens distortion, after a motion.
+    #[test]
+    fn the_warp_is_its_definition_point_by_point() {
+        let (cloud, fixture) = plane();
+        let distorted = Camera::new(
+            *fixture.intrinsics(),
+            Some(ucm::Distortion {
+                k1: -0.05,
+                k2: 0.01,
+                p1: 0.001,
+                p2: -0.001,
+                k3: 0.0,
+            }),
+            fixture.width(),
+            fixture.height(),
+            ucm::ValidRegion::Full,
+        )
+        .unwrap();
+        let pose = Isometry3::from_pose_vector([3.0, 3.0, -0.4, 0.0, 0.0, 0.0]).unwrap();
+        let motion = Isometry3::from_pose_vector([0.05, -0.03, 0.02, 0.01, -0.02, 0.015]).unwrap();
+        for camera in [fixture, distorted] {
+            let mut renderer =
+                splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
+            let mut frame = Frame::for_camera(&camera);
+            renderer
+                .render(&cloud, &pose.inverse(), &mut frame)
+                .unwrap();
+            let (mut rays_of_pixels, mut points) =
+                (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
+            rays(&camera, &mut rays_of_pixels);
+            lift(&frame, &rays_of_pixels, &mut points);
+            let picture = Image::from_frame(&frame);
+            let mut out = Image::new(camera.width(), camera.height());
+            warp(&camera, &points, &motion, &picture, &mut out);
+            let rotation = Mat3::from_quat(motion.rotation.as_quat());
+            let translation = motion.translation.as_vec3();
+            let (w, h) = (camera.width() as usize, camera.height() as usize);
+            let usable = |c: usize| camera.valid_pixels()[c] && picture.valid[c];
+            let mut compared = 0;
+            for (k, p) in points.iter().enumerate() {
+                let q = rotation * Vec3::from_array(*p) + translation;
+                let expected = camera
+                    .project_unbounded(q.to_array())
+                    .ok()
+                    .and_then(|[u, v]| {
+                        if !(u >= 0.0 && v >= 0.0 && u < (w - 1) as f32 && v < (h - 1) as f32) {
+                            return None;
+                        }
+                        let (x0, y0) = (u as usize, v as usize);
+                        let (fx, fy) = (u - x0 as f32, v - y0 as f32);
+                        let i = y0 * w + x0;
+                        let c = [i, i + 1, i + w, i + w + 1];
+                        c.iter().all(|&c| usable(c)).then(|| {
+                            let [a, b, c, d] = c.map(|c| picture.intensity[c]);
+                            (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy
+                        })
+                    });
+                let got = out.valid[k].then_some(out.intensity[k]);
+                assert_eq!(
+                    got.map(f32::to_bits),
+                    expected.map(f32::to_bits),
+                    "pixel {k}"
+                );
+                compared += usize::from(got.is_some());
+            }
+            assert!(compared > 5000, "{compared} pixels compared");
+        }
     }
 
     /// At the reference itself the warp gives the picture back at every hit whose
