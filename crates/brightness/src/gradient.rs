@@ -67,6 +67,9 @@ pub(crate) struct MaskedGradient {
     interior: Vec<[u32; 2]>,
     /// Valid pixels with at least one neighbour missing (invalid or outside).
     edge: Vec<u32>,
+    /// The region planned (a picture compared against keeps its region from one
+    /// iteration to the next: its plan is then kept, not built again).
+    valid: Vec<bool>,
 }
 
 impl MaskedGradient {
@@ -76,8 +79,14 @@ impl MaskedGradient {
         plan
     }
 
-    /// The plan of another region, in place (the buffers kept).
+    /// The plan of another region, in place (the buffers kept; nothing to do if the
+    /// region is the one planned).
     pub(crate) fn rebuild(&mut self, valid: &[bool], width: usize, height: usize) {
+        if (self.width, self.height) == (width, height) && self.valid == valid {
+            return;
+        }
+        self.valid.clear();
+        self.valid.extend_from_slice(valid);
         let (interior, edge) = (&mut self.interior, &mut self.edge);
         interior.clear();
         edge.clear();
@@ -164,6 +173,45 @@ mod tests {
             MaskedGradient::new(&valid, width, height).compute(&image, &valid, &mut got);
             for k in 0..n {
                 prop_assert_eq!(got[k].map(f32::to_bits), expected[k].map(f32::to_bits), "pixel {}", k);
+            }
+        }
+
+        /// A plan rebuilt in place (for another region, for the same one again, back
+        /// to the first, and for the same pixels read as another shape) computes what a
+        /// new plan of that region does.
+        #[test]
+        fn a_plan_rebuilt_is_the_plan_of_its_region(
+            width in 1usize..30,
+            height in 1usize..20,
+            seed in 0u64..10_000,
+        ) {
+            let n = width * height;
+            let mut state = seed | 1;
+            let mut next = || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let first: Vec<bool> = (0..n).map(|_| next() < 0.7).collect();
+            let mut second = first.clone();
+            second[(next() * n as f64) as usize % n] ^= true;
+            let image: Vec<f32> = (0..n).map(|_| next() as f32).collect();
+            let mut plan = MaskedGradient::new(&first, width, height);
+            for (valid, w, h) in [
+                (&second, width, height),
+                (&second, width, height),
+                (&first, width, height),
+                (&first, height, width),
+            ] {
+                plan.rebuild(valid, w, h);
+                let mut got = vec![[0.0f32; 2]; n];
+                plan.compute(&image, valid, &mut got);
+                let mut expected = vec![[0.0f32; 2]; n];
+                MaskedGradient::new(valid, w, h).compute(&image, valid, &mut expected);
+                for k in 0..n {
+                    prop_assert_eq!(got[k].map(f32::to_bits), expected[k].map(f32::to_bits));
+                }
             }
         }
     }
