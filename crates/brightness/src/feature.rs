@@ -166,25 +166,24 @@ impl Brightness {
     /// reads. [`Brightness::values`] and [`Brightness::interaction`] keep what the
     /// last [`Brightness::compute`] gave.
     pub fn compute_pixels(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
-        self.checked_pixels(picture, true)
+        self.checked_pixels(picture, Outputs::Derivatives)
     }
 
     /// The image part of [`Brightness::compute_pixels`] only: [`Brightness::image`]
-    /// (normalised if enabled), [`Brightness::observed`] and
-    /// [`Brightness::inverse_range`], the same values, without the gradient and the
-    /// interaction rows (what a feature of a desired picture reads: its transform, not
-    /// its derivative). [`Brightness::gradient`] and [`Brightness::pixel_interaction`]
-    /// keep what the last computation with them gave.
+    /// (normalised if enabled) and [`Brightness::observed`], the same values, without
+    /// the inverse ranges, the gradient and the interaction rows (what a feature of a
+    /// desired picture reads: its transform, not its derivative).
+    /// [`Brightness::inverse_range`], [`Brightness::gradient`] and
+    /// [`Brightness::pixel_interaction`] keep what the last computation with them gave.
     pub fn compute_image(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
-        self.checked_pixels(picture, false)
+        self.checked_pixels(picture, Outputs::Image)
     }
 
-    /// [`Brightness::pixels`] once the size is checked, with the gradient and the
-    /// interaction rows or without.
+    /// [`Brightness::pixels`] once the size is checked.
     fn checked_pixels(
         &mut self,
         picture: &impl AnyImage,
-        derivatives: bool,
+        outputs: Outputs,
     ) -> Result<(), BrightnessError> {
         if picture.width() as usize != self.tables.width
             || picture.height() as usize != self.tables.height
@@ -201,7 +200,7 @@ impl Brightness {
         isa::arch().dispatch(Pixels {
             brightness: self,
             picture,
-            derivatives,
+            outputs,
         });
         Ok(())
     }
@@ -253,7 +252,7 @@ impl Brightness {
             }
         }
         // The gradient and the rows are those of the edge of the support, below.
-        self.checked_pixels(rendering, false)?;
+        self.checked_pixels(rendering, Outputs::Ranges)?;
         // Compiled for the widest instruction set found at run time (the same
         // operations: the same bits).
         isa::arch().dispatch(EdgeOfSupport {
@@ -338,27 +337,36 @@ impl Brightness {
         self.rows();
     }
 
-    /// The body of [`Brightness::compute_pixels`] (`derivatives`) or
-    /// [`Brightness::compute_image`], once the size is checked.
+    /// The body of [`Brightness::compute_pixels`], [`Brightness::compute_image`] and
+    /// of the start of [`Brightness::compute_pixels_against`], once the size is
+    /// checked.
     #[inline(always)]
-    fn pixels(&mut self, picture: &impl AnyImage, derivatives: bool) {
+    fn pixels(&mut self, picture: &impl AnyImage, outputs: Outputs) {
         let valid = self.tables.grid.valid();
-        picture
-            .inverse_range(&mut self.inverse_range)
-            .expect("picture size checked above");
+        let ranges = outputs >= Outputs::Ranges;
+        let derivatives = outputs == Outputs::Derivatives;
+        if ranges {
+            picture
+                .inverse_range(&mut self.inverse_range)
+                .expect("picture size checked above");
+        }
         // The image is zero outside the valid pixels from the start and never written
         // there; the inverse ranges are zeroed between the valid runs.
         let mut end = 0;
         let mut all_observed = true;
         for &[start, stop] in self.tables.valid_runs.iter() {
             let run = start as usize..stop as usize;
-            self.inverse_range[end..run.start].fill(0.0);
+            if ranges {
+                self.inverse_range[end..run.start].fill(0.0);
+            }
             picture.observed_intensity(run.clone(), &mut self.image[run.clone()]);
             picture.observed(run.clone(), &mut self.observed[run.clone()]);
             all_observed &= self.observed[run.clone()].iter().all(|&o| o);
             end = run.end;
         }
-        self.inverse_range[end..].fill(0.0);
+        if ranges {
+            self.inverse_range[end..].fill(0.0);
+        }
         self.all_observed = all_observed;
         self.scale = 1.0;
         self.mean = 0.0;
@@ -550,7 +558,18 @@ impl Brightness {
 struct Pixels<'a, P> {
     brightness: &'a mut Brightness,
     picture: &'a P,
-    derivatives: bool,
+    outputs: Outputs,
+}
+
+/// What [`Brightness::pixels`] computes, each with what the one before does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Outputs {
+    /// The image (normalised if enabled) and the observed pixels.
+    Image,
+    /// And the inverse ranges.
+    Ranges,
+    /// And the gradient and the interaction rows.
+    Derivatives,
 }
 
 /// [`Brightness::edge_of_support`] as a `pulp` kernel.
@@ -573,6 +592,6 @@ impl<P: AnyImage> pulp::WithSimd for Pixels<'_, P> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.brightness.pixels(self.picture, self.derivatives);
+        self.brightness.pixels(self.picture, self.outputs);
     }
 }
