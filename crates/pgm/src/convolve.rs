@@ -105,6 +105,80 @@ pub fn rows(
     }
 }
 
+/// [`rows`] of each channel of an image of `C`-vectors (`src`, `width × height`), each
+/// channel with the bits [`rows`] gives it alone, each row's channels computed while it
+/// is in the first level of cache (its vectors read once, not once a channel). `dst`
+/// holds the channels' output rows row after row: channel `c` of row `y` at `(y · C +
+/// c) · width` (the layout [`add_columns_of`] reads).
+pub fn rows_interleaved<const C: usize>(
+    src: &[[f32; C]],
+    dst: &mut [f32],
+    width: usize,
+    kernel: &[f32],
+    spans: &[Span],
+    parallel: bool,
+) {
+    let pad_len = width + kernel.len() + LANES;
+    let one = |(s, d): (&[[f32; C]], &mut [f32]), span: Span| {
+        PAD.with_borrow_mut(|pad| {
+            if pad.len() < pad_len {
+                pad.resize(pad_len, 0.0);
+            }
+            for (c, d) in d.chunks_exact_mut(width).enumerate() {
+                crate::simd::on_widest(RowOp {
+                    s: Channel(s, c),
+                    d,
+                    width,
+                    kernel,
+                    span,
+                    pad,
+                });
+            }
+        });
+    };
+    if parallel {
+        src.par_chunks_exact(width)
+            .zip(dst.par_chunks_exact_mut(C * width))
+            .zip(spans)
+            .with_min_len(16)
+            .for_each(|(row, &span)| one(row, span));
+    } else {
+        for (row, &span) in src
+            .chunks_exact(width)
+            .zip(dst.chunks_exact_mut(C * width))
+            .zip(spans)
+        {
+            one(row, span);
+        }
+    }
+}
+
+/// A row [`row_inline`] reads: its values copied into the padded row.
+trait RowSource: Copy {
+    /// Copy the values of columns `a..b` into `out` (`b − a` values).
+    fn copy(self, a: usize, b: usize, out: &mut [f32]);
+}
+
+impl RowSource for &[f32] {
+    #[inline(always)]
+    fn copy(self, a: usize, b: usize, out: &mut [f32]) {
+        out.copy_from_slice(&self[a..b]);
+    }
+}
+
+/// Channel `.1` of a row of vectors.
+#[derive(Clone, Copy)]
+struct Channel<'a, const C: usize>(&'a [[f32; C]], usize);
+
+impl<const C: usize> RowSource for Channel<'_, C> {
+    #[inline(always)]
+    fn copy(self, a: usize, b: usize, out: &mut [f32]) {
+        for (o, v) in out.iter_mut().zip(&self.0[a..b]) {
+            *o = v[self.1];
+        }
+    }
+}
+
 thread_local! {
     /// The zero-padded row of [`rows`], per thread (zero outside the copy it holds
     /// during one row).
@@ -125,8 +199,8 @@ fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], span: Span, pad: 
 }
 
 /// The arguments of [`row`], a [`crate::simd::Kernel`].
-struct RowOp<'a> {
-    s: &'a [f32],
+struct RowOp<'a, R> {
+    s: R,
     d: &'a mut [f32],
     width: usize,
     kernel: &'a [f32],
@@ -134,7 +208,7 @@ struct RowOp<'a> {
     pad: &'a mut [f32],
 }
 
-impl crate::simd::Kernel for RowOp<'_> {
+impl<R: RowSource> crate::simd::Kernel for RowOp<'_, R> {
     #[inline(always)]
     fn run<S: pulp::Simd>(self, _: S) {
         row_inline(self.s, self.d, self.width, self.kernel, self.span, self.pad);
@@ -143,7 +217,7 @@ impl crate::simd::Kernel for RowOp<'_> {
 
 #[inline(always)]
 fn row_inline(
-    s: &[f32],
+    s: impl RowSource,
     d: &mut [f32],
     width: usize,
     kernel: &[f32],
@@ -157,7 +231,7 @@ fn row_inline(
         return;
     }
     // pad[i] = s[i − r] inside the span, 0 elsewhere: out[x] = Σ_k K[k] pad[x + k].
-    pad[a + r..b + r].copy_from_slice(&s[a..b]);
+    s.copy(a, b, &mut pad[a + r..b + r]);
     let (x0, x1) = (a.saturating_sub(r), (b + r).min(width));
     let mut x = x0;
     while x < x1 {
@@ -203,13 +277,49 @@ pub fn add_columns(
     out: &[(usize, Span)],
     parallel: bool,
 ) {
+    add_columns_of(src, [0, width], dst, width, height, kernel, out, parallel);
+}
+
+/// [`columns`] of the image whose row `y` starts at `offset + y · stride` in `src`
+/// (`[offset, stride]`): a channel of [`rows_interleaved`]'s output, `[c · width, C ·
+/// width]`.
+#[allow(clippy::too_many_arguments)]
+pub fn columns_of(
+    src: &[f32],
+    layout: [usize; 2],
+    dst: &mut [f32],
+    width: usize,
+    height: usize,
+    kernel: &[f32],
+    out: &[(usize, Span)],
+    parallel: bool,
+) {
+    for &(y, [a, b]) in out {
+        dst[y * width + a..y * width + b].fill(0.0);
+    }
+    add_columns_of(src, layout, dst, width, height, kernel, out, parallel);
+}
+
+/// [`add_columns`] of the image whose row `y` starts at `offset + y · stride` in `src`.
+#[allow(clippy::too_many_arguments)]
+fn add_columns_of(
+    src: &[f32],
+    [offset, stride]: [usize; 2],
+    dst: &mut [f32],
+    width: usize,
+    height: usize,
+    kernel: &[f32],
+    out: &[(usize, Span)],
+    parallel: bool,
+) {
     let one = |y: usize, span: Span, d: &mut [f32]| {
         crate::simd::on_widest(ColumnOp {
             src,
+            offset,
+            stride,
             d,
             y,
             span,
-            width,
             height,
             kernel,
         })
@@ -233,10 +343,12 @@ pub fn add_columns(
 /// One output row of [`add_columns`], a [`crate::simd::Kernel`].
 struct ColumnOp<'a> {
     src: &'a [f32],
+    /// Where the input's row `y` starts: `offset + y · stride`.
+    offset: usize,
+    stride: usize,
     d: &'a mut [f32],
     y: usize,
     span: Span,
-    width: usize,
     height: usize,
     kernel: &'a [f32],
 }
@@ -246,10 +358,11 @@ impl crate::simd::Kernel for ColumnOp<'_> {
     fn run<S: pulp::Simd>(self, _: S) {
         let Self {
             src,
+            offset,
+            stride,
             d,
             y,
             span: [a, b],
-            width,
             height,
             kernel,
         } = self;
@@ -259,7 +372,8 @@ impl crate::simd::Kernel for ColumnOp<'_> {
         for ki in k0..k1 {
             let c = kernel[ki];
             let yy = y + ki - r;
-            for (o, &i) in d[a..b].iter_mut().zip(&src[yy * width + a..yy * width + b]) {
+            let row = offset + yy * stride;
+            for (o, &i) in d[a..b].iter_mut().zip(&src[row + a..row + b]) {
                 *o += c * i;
             }
         }

@@ -176,7 +176,8 @@ pub struct Pgm {
     /// the row step `interpolation_step`.
     interpolation: Vec<Between>,
     interpolation_step: usize,
-    /// Interleaved six-channel planes of the recursive `L_G` (allocated on first use).
+    /// Interleaved six-channel planes of the recursive `L_G`, or the row passes of the
+    /// exact one (allocated on first use).
     lanes: Vec<[f32; 6]>,
     lanes_t: Vec<[f32; 6]>,
     h_g: Vec<f32>,
@@ -496,7 +497,16 @@ impl Pgm {
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute_pixels_against(rendering, against)?;
-        self.features(lambda, jacobian)
+        let t0 = std::time::Instant::now();
+        let r = self.features(lambda, jacobian);
+        if std::env::var_os("PGM_TIME_CA").is_some() {
+            eprintln!(
+                "features w{} {:.3}",
+                self.width,
+                t0.elapsed().as_secs_f64() * 1e3
+            );
+        }
+        r
     }
 
     /// `G`, `J_λ` and `L_G` of the brightness's last picture.
@@ -557,18 +567,17 @@ impl Pgm {
         }
         match jacobian {
             PgmJacobian::Convolved => {
-                // Six separable convolutions of the masked per-pixel rows L_I.
+                // Six separable convolutions of the masked per-pixel rows L_I: the six
+                // row passes together, each row of L_I read once (the channels' rows
+                // one after the other in `lanes`), then each channel's column pass.
+                self.lanes.resize(w * h, [0.0; 6]);
+                let rows = self.lanes.as_flattened_mut();
+                let li = self.brightness.pixel_interaction();
+                convolve::rows_interleaved(li, rows, w, &k.g, &self.row_spans, par);
                 for c in 0..6 {
-                    for (p, row) in self
-                        .plane
-                        .iter_mut()
-                        .zip(self.brightness.pixel_interaction())
-                    {
-                        *p = row[c];
-                    }
-                    convolve::rows(&self.plane, &mut self.out2, w, &k.g, &self.row_spans, par);
-                    convolve::columns(
-                        &self.out2,
+                    convolve::columns_of(
+                        self.lanes.as_flattened(),
+                        [c * w, 6 * w],
                         &mut self.out,
                         w,
                         h,

@@ -1,7 +1,7 @@
 //! The correlations against the textbook loops, bit for bit: skipping the zero inputs
 //! outside each row's span and writing only the wanted spans changes no value.
 
-use pgm::convolve::{Span, add_columns, columns, rows};
+use pgm::convolve::{Span, add_columns, columns, columns_of, rows, rows_interleaved};
 use proptest::prelude::*;
 
 /// One output at a time over the whole row, taps in order, zero padding.
@@ -101,6 +101,51 @@ proptest! {
         let mut got = base;
         columns(&src, &mut got, width, height, &kernel, &wanted, parallel);
         prop_assert!(in_spans(&got, &expected));
+    }
+
+    /// The row passes of three channels together, and the column pass of each channel
+    /// in their layout, give each channel's own passes' bits.
+    #[test]
+    fn interleaved_channels_equal_each_channel_alone(
+        width in 1usize..50,
+        height in 1usize..30,
+        radius in 0usize..12,
+        seed in any::<u64>(),
+        parallel in any::<bool>(),
+    ) {
+        let mut rng = Lcg(seed);
+        let spans: Vec<Span> = (0..height)
+            .map(|_| {
+                let a = (rng.unit() * width as f64) as usize;
+                let b = a + (rng.unit() * (width - a + 1) as f64) as usize;
+                [a, b.min(width)]
+            })
+            .collect();
+        let mut src = vec![[0.0f32; 3]; width * height];
+        for (y, &[a, b]) in spans.iter().enumerate() {
+            for v in &mut src[y * width + a..y * width + b] {
+                *v = [0; 3].map(|_| rng.uniform(-1.0, 1.0) as f32);
+            }
+        }
+        let kernel: Vec<f32> = (0..2 * radius + 1).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+        let wanted: Vec<(usize, Span)> = spans.iter().copied().enumerate().collect();
+        let mut together = vec![f32::NAN; 3 * width * height];
+        rows_interleaved(&src, &mut together, width, &kernel, &spans, parallel);
+        for c in 0..3 {
+            let channel: Vec<f32> = src.iter().map(|v| v[c]).collect();
+            let mut alone = vec![0.0f32; width * height];
+            rows(&channel, &mut alone, width, &kernel, &spans, parallel);
+            for y in 0..height {
+                let got = &together[(3 * y + c) * width..][..width];
+                let expected = &alone[y * width..][..width];
+                prop_assert!(got.iter().zip(expected).all(|(a, b)| a.to_bits() == b.to_bits()));
+            }
+            let mut expected = vec![1.0f32; width * height];
+            columns(&alone, &mut expected, width, height, &kernel, &wanted, parallel);
+            let mut got = vec![1.0f32; width * height];
+            columns_of(&together, [c * width, 3 * width], &mut got, width, height, &kernel, &wanted, parallel);
+            prop_assert!(got.iter().zip(&expected).all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
     }
 }
 
