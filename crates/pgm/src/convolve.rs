@@ -109,7 +109,7 @@ pub fn rows(
 /// channel with the bits [`rows`] gives it alone, each row's channels computed while it
 /// is in the first level of cache (its vectors read once, not once a channel). `dst`
 /// holds the channels' output rows row after row: channel `c` of row `y` at `(y · C +
-/// c) · width` (the layout [`add_columns_of`] reads).
+/// c) · width` (the layout [`columns_of`] reads).
 pub fn rows_interleaved<const C: usize>(
     src: &[[f32; C]],
     dst: &mut [f32],
