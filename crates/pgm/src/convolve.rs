@@ -78,31 +78,8 @@ pub fn rows(
     spans: &[Span],
     parallel: bool,
 ) {
-    let pad_len = width + kernel.len() + LANES;
-    // Each thread keeps its padded row between calls: no allocation per image.
-    let one = |(s, d): (&[f32], &mut [f32]), span: Span| {
-        PAD.with_borrow_mut(|pad| {
-            if pad.len() < pad_len {
-                pad.resize(pad_len, 0.0);
-            }
-            row(s, d, width, kernel, span, pad);
-        });
-    };
-    if parallel {
-        src.par_chunks_exact(width)
-            .zip(dst.par_chunks_exact_mut(width))
-            .zip(spans)
-            .with_min_len(16)
-            .for_each(|(row, &span)| one(row, span));
-    } else {
-        for (row, &span) in src
-            .chunks_exact(width)
-            .zip(dst.chunks_exact_mut(width))
-            .zip(spans)
-        {
-            one(row, span);
-        }
-    }
+    // An image of one channel.
+    rows_interleaved::<1>(src.as_chunks().0, dst, width, kernel, spans, parallel);
 }
 
 /// [`rows`] of each channel of an image of `C`-vectors (`src`, `width × height`), each
@@ -119,6 +96,7 @@ pub fn rows_interleaved<const C: usize>(
     parallel: bool,
 ) {
     let pad_len = width + kernel.len() + LANES;
+    // Each thread keeps its padded row between calls: no allocation per image.
     let one = |(s, d): (&[[f32; C]], &mut [f32]), span: Span| {
         PAD.with_borrow_mut(|pad| {
             if pad.len() < pad_len {
@@ -153,26 +131,18 @@ pub fn rows_interleaved<const C: usize>(
     }
 }
 
-/// A row [`row_inline`] reads: its values copied into the padded row.
-trait RowSource: Copy {
-    /// Copy the values of columns `a..b` into `out` (`b − a` values).
-    fn copy(self, a: usize, b: usize, out: &mut [f32]);
-}
-
-impl RowSource for &[f32] {
-    #[inline(always)]
-    fn copy(self, a: usize, b: usize, out: &mut [f32]) {
-        out.copy_from_slice(&self[a..b]);
-    }
-}
-
-/// Channel `.1` of a row of vectors.
+/// Channel `.1` of a row of vectors, as [`row_inline`] reads it.
 #[derive(Clone, Copy)]
 struct Channel<'a, const C: usize>(&'a [[f32; C]], usize);
 
-impl<const C: usize> RowSource for Channel<'_, C> {
+impl<const C: usize> Channel<'_, C> {
+    /// Copy the values of columns `a..b` into `out` (`b − a` values).
     #[inline(always)]
     fn copy(self, a: usize, b: usize, out: &mut [f32]) {
+        if C == 1 {
+            out.copy_from_slice(self.0[a..b].as_flattened());
+            return;
+        }
         for (o, v) in out.iter_mut().zip(&self.0[a..b]) {
             *o = v[self.1];
         }
@@ -185,22 +155,11 @@ thread_local! {
     static PAD: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// One row of [`rows`]; `pad` holds at least `width + kernel.len() + LANES` values
-/// and is zero outside the span's copy (restored before returning).
-fn row(s: &[f32], d: &mut [f32], width: usize, kernel: &[f32], span: Span, pad: &mut [f32]) {
-    crate::simd::on_widest(RowOp {
-        s,
-        d,
-        width,
-        kernel,
-        span,
-        pad,
-    });
-}
-
-/// The arguments of [`row`], a [`crate::simd::Kernel`].
-struct RowOp<'a, R> {
-    s: R,
+/// One row of a channel of [`rows_interleaved`], a [`crate::simd::Kernel`]; `pad`
+/// holds at least `width + kernel.len() + LANES` values and is zero outside the span's
+/// copy (restored before returning).
+struct RowOp<'a, const C: usize> {
+    s: Channel<'a, C>,
     d: &'a mut [f32],
     width: usize,
     kernel: &'a [f32],
@@ -208,7 +167,7 @@ struct RowOp<'a, R> {
     pad: &'a mut [f32],
 }
 
-impl<R: RowSource> crate::simd::Kernel for RowOp<'_, R> {
+impl<const C: usize> crate::simd::Kernel for RowOp<'_, C> {
     #[inline(always)]
     fn run<S: pulp::Simd>(self, _: S) {
         row_inline(self.s, self.d, self.width, self.kernel, self.span, self.pad);
@@ -216,8 +175,8 @@ impl<R: RowSource> crate::simd::Kernel for RowOp<'_, R> {
 }
 
 #[inline(always)]
-fn row_inline(
-    s: impl RowSource,
+fn row_inline<const C: usize>(
+    s: Channel<'_, C>,
     d: &mut [f32],
     width: usize,
     kernel: &[f32],
@@ -260,10 +219,7 @@ pub fn columns(
     out: &[(usize, Span)],
     parallel: bool,
 ) {
-    for &(y, [a, b]) in out {
-        dst[y * width + a..y * width + b].fill(0.0);
-    }
-    add_columns(src, dst, width, height, kernel, out, parallel);
+    columns_of(src, [0, width], dst, width, height, kernel, out, parallel);
 }
 
 /// Add the column correlation of `src` with `kernel` to the spans `out` (row, columns;

@@ -497,16 +497,7 @@ impl Pgm {
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
         self.brightness.compute_pixels_against(rendering, against)?;
-        let t0 = std::time::Instant::now();
-        let r = self.features(lambda, jacobian);
-        if std::env::var_os("PGM_TIME_CA").is_some() {
-            eprintln!(
-                "features w{} {:.3}",
-                self.width,
-                t0.elapsed().as_secs_f64() * 1e3
-            );
-        }
-        r
+        self.features(lambda, jacobian)
     }
 
     /// `G`, `J_λ` and `L_G` of the brightness's last picture.

@@ -58,13 +58,7 @@ proptest! {
         row_step in 1usize..4,
     ) {
         let mut rng = Lcg(seed);
-        let spans: Vec<Span> = (0..height)
-            .map(|_| {
-                let a = (rng.unit() * width as f64) as usize;
-                let b = a + (rng.unit() * (width - a + 1) as f64) as usize;
-                [a, b.min(width)]
-            })
-            .collect();
+        let spans = random_spans(&mut rng, width, height);
         let mut src = vec![0.0f32; width * height];
         for (y, &[a, b]) in spans.iter().enumerate() {
             for v in &mut src[y * width + a..y * width + b] {
@@ -114,13 +108,7 @@ proptest! {
         parallel in any::<bool>(),
     ) {
         let mut rng = Lcg(seed);
-        let spans: Vec<Span> = (0..height)
-            .map(|_| {
-                let a = (rng.unit() * width as f64) as usize;
-                let b = a + (rng.unit() * (width - a + 1) as f64) as usize;
-                [a, b.min(width)]
-            })
-            .collect();
+        let spans = random_spans(&mut rng, width, height);
         let mut src = vec![[0.0f32; 3]; width * height];
         for (y, &[a, b]) in spans.iter().enumerate() {
             for v in &mut src[y * width + a..y * width + b] {
@@ -147,6 +135,17 @@ proptest! {
             prop_assert!(got.iter().zip(&expected).all(|(a, b)| a.to_bits() == b.to_bits()));
         }
     }
+}
+
+/// A random span of each of `height` rows `width` pixels wide (some empty).
+fn random_spans(rng: &mut Lcg, width: usize, height: usize) -> Vec<Span> {
+    (0..height)
+        .map(|_| {
+            let a = (rng.unit() * width as f64) as usize;
+            let b = a + (rng.unit() * (width - a + 1) as f64) as usize;
+            [a, b.min(width)]
+        })
+        .collect()
 }
 
 /// A small deterministic generator for the tests' random inputs.
