@@ -259,3 +259,52 @@ fn no_file_is_a_diary() {
     }
     assert!(diary.is_empty(), "files speaking of {word}s: {diary:?}");
 }
+
+/// Libraries report through their return values, not by printing, and read no
+/// environment variable (but `isa`, whose switch for the AVX-512 paths is one): a
+/// timer or a print left from a measurement fails here. Test modules (from a
+/// `#[cfg(test)]` line followed by a `mod`) and comments are not read; `bench-conv`
+/// (the experiments' program) and `test-support` are not libraries of the method.
+#[test]
+fn libraries_neither_print_nor_read_the_environment() {
+    fn visit(dir: &Path, found: &mut Vec<String>) {
+        for entry in fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                visit(&path, found);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                let text = read(&path);
+                let lines: Vec<&str> = text.lines().collect();
+                for (i, line) in lines.iter().enumerate() {
+                    let code = line.trim_start();
+                    if code == "#[cfg(test)]"
+                        && lines
+                            .get(i + 1)
+                            .is_some_and(|l| l.trim_start().starts_with("mod "))
+                    {
+                        break;
+                    }
+                    if code.starts_with("//") {
+                        continue;
+                    }
+                    let allowed_env = path.ends_with("crates/isa/src/lib.rs");
+                    let prints = ["println!", "print!(", "dbg!("]
+                        .iter()
+                        .any(|p| code.contains(p));
+                    let reads_env = code.contains("env::var") && !allowed_env;
+                    if prints || reads_env {
+                        found.push(format!("{}:{}: {}", path.display(), i + 1, code));
+                    }
+                }
+            }
+        }
+    }
+    let mut found = Vec::new();
+    for dir in crate_dirs() {
+        let name = dir.file_name().unwrap().to_string_lossy().to_string();
+        if name != "bench-conv" && name != "test-support" {
+            visit(&dir.join("src"), &mut found);
+        }
+    }
+    assert!(found.is_empty(), "{found:#?}");
+}
