@@ -27,6 +27,15 @@ struct Tables {
     samples: Vec<u32>,
 }
 
+impl Tables {
+    /// The valid runs as ranges of pixel indices: the samples, run by run.
+    fn runs(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.valid_runs
+            .iter()
+            .map(|&[start, end]| start as usize..end as usize)
+    }
+}
+
 /// The picture a rendering is compared with on their common support
 /// ([`Brightness::compute_against`]).
 #[derive(Clone, Copy, Debug)]
@@ -375,25 +384,20 @@ impl Brightness {
             return;
         }
         if self.normalize {
+            // The samples are the valid runs' pixels, in order: the sums read them run
+            // by run (contiguous, not gathered), in the same order.
             let m = self.tables.samples.len().max(1) as f64;
-            let mean = self
-                .tables
-                .samples
-                .iter()
-                .map(|&k| f64::from(self.image[k as usize]))
-                .sum::<f64>()
-                / m;
-            let norm = self
-                .tables
-                .samples
-                .iter()
-                .map(|&k| (f64::from(self.image[k as usize]) - mean).powi(2))
+            let samples = || self.tables.runs().flat_map(|run| &self.image[run]);
+            let mean = samples().map(|&x| f64::from(x)).sum::<f64>() / m;
+            let norm = samples()
+                .map(|&x| (f64::from(x) - mean).powi(2))
                 .sum::<f64>()
                 .sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
-            for &k in self.tables.samples.iter() {
-                let k = k as usize;
-                self.image[k] = ((f64::from(self.image[k]) - mean) * scale) as f32;
+            for run in self.tables.runs() {
+                for x in &mut self.image[run] {
+                    *x = ((f64::from(*x) - mean) * scale) as f32;
+                }
             }
             self.scale = scale as f32;
             self.mean = mean;
@@ -415,29 +419,29 @@ impl Brightness {
     #[inline(always)]
     fn partly_observed(&mut self, derivatives: bool) {
         if self.normalize {
-            let observed = || {
-                self.tables
-                    .samples
-                    .iter()
-                    .filter(|&&k| self.observed[k as usize])
+            // Run by run, as in `pixels`.
+            let (tables, image, observed) = (&self.tables, &self.image, &self.observed);
+            let count = tables
+                .runs()
+                .map(|run| observed[run].iter().filter(|&&o| o).count())
+                .sum::<usize>()
+                .max(1) as f64;
+            let samples = || {
+                tables
+                    .runs()
+                    .flat_map(|run| image[run.clone()].iter().zip(&observed[run]))
+                    .filter(|(_, o)| **o)
+                    .map(|(&x, _)| f64::from(x))
             };
-            let count = observed().count().max(1) as f64;
-            let mean = observed()
-                .map(|&k| f64::from(self.image[k as usize]))
-                .sum::<f64>()
-                / count;
-            let norm = observed()
-                .map(|&k| (f64::from(self.image[k as usize]) - mean).powi(2))
-                .sum::<f64>()
-                .sqrt();
+            let mean = samples().sum::<f64>() / count;
+            let norm = samples().map(|x| (x - mean).powi(2)).sum::<f64>().sqrt();
             let scale = if norm > 0.0 { 1.0 / norm } else { 1.0 };
-            for &k in self.tables.samples.iter() {
-                let k = k as usize;
-                self.image[k] = if self.observed[k] {
-                    ((f64::from(self.image[k]) - mean) * scale) as f32
-                } else {
-                    0.0
-                };
+            for run in self.tables.runs() {
+                let pixels = self.image[run.clone()].iter_mut().zip(&self.observed[run]);
+                for (x, &o) in pixels {
+                    let normalized = ((f64::from(*x) - mean) * scale) as f32;
+                    *x = if o { normalized } else { 0.0 };
+                }
             }
             self.scale = scale as f32;
             self.mean = mean;
