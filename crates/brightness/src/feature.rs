@@ -363,8 +363,7 @@ impl Brightness {
         // there; the inverse ranges are zeroed between the valid runs.
         let mut end = 0;
         let mut all_observed = true;
-        for &[start, stop] in self.tables.valid_runs.iter() {
-            let run = start as usize..stop as usize;
+        for run in self.tables.runs() {
             if ranges {
                 self.inverse_range[end..run.start].fill(0.0);
             }
@@ -453,9 +452,12 @@ impl Brightness {
             .rebuild(&self.observed, self.tables.width, self.tables.height);
         self.observed_gradient
             .compute(&self.image, &self.observed, &mut self.gradient);
-        for &k in self.tables.samples.iter() {
-            if !self.observed[k as usize] {
-                self.gradient[k as usize] = [0.0; 2];
+        for run in self.tables.runs() {
+            let pixels = self.gradient[run.clone()]
+                .iter_mut()
+                .zip(&self.observed[run]);
+            for (g, &o) in pixels {
+                *g = if o { *g } else { [0.0; 2] };
             }
         }
         self.rows();
@@ -466,8 +468,8 @@ impl Brightness {
     #[inline(always)]
     fn rows(&mut self) {
         let mut first = 0;
-        for &[start, end] in self.tables.valid_runs.iter() {
-            let (run, n) = (start as usize..end as usize, (end - start) as usize);
+        for run in self.tables.runs() {
+            let n = run.len();
             photometric::rows(photometric::Run {
                 u: &self.tables.factors_u[first..first + n],
                 v: &self.tables.factors_v[first..first + n],

@@ -330,20 +330,19 @@ impl crate::simd::Kernel for ColumnOp<'_> {
         let k1 = (kernel.len()).min(height + r - y);
         // `COLUMN_LANES` outputs at a time in registers, loaded once and stored once,
         // every tap added in order; the last outputs one tap at a time.
-        const COLS: usize = COLUMN_LANES;
         let mut x = a;
-        while x + COLS <= b {
-            let mut acc: [f32; COLS] = d[x..x + COLS].try_into().unwrap();
+        while x + COLUMN_LANES <= b {
+            let mut acc: [f32; COLUMN_LANES] = d[x..x + COLUMN_LANES].try_into().unwrap();
             for ki in k0..k1 {
                 let c = kernel[ki];
                 let row = offset + (y + ki - r) * stride + x;
-                let input: &[f32; COLS] = src[row..row + COLS].try_into().unwrap();
-                for j in 0..COLS {
+                let input: &[f32; COLUMN_LANES] = src[row..row + COLUMN_LANES].try_into().unwrap();
+                for j in 0..COLUMN_LANES {
                     acc[j] += c * input[j];
                 }
             }
-            d[x..x + COLS].copy_from_slice(&acc);
-            x += COLS;
+            d[x..x + COLUMN_LANES].copy_from_slice(&acc);
+            x += COLUMN_LANES;
         }
         for ki in k0..k1 {
             let c = kernel[ki];

@@ -207,6 +207,25 @@ mod tests {
         (cloud, camera)
     }
 
+    /// `cloud` rendered by `camera` at `world_from_camera`, and its pixels lifted to
+    /// points of the camera's frame.
+    fn rendered_and_lifted(
+        cloud: &PointCloud,
+        camera: &Camera,
+        world_from_camera: &Isometry3,
+    ) -> (Frame, Vec<[f32; 3]>) {
+        let mut renderer =
+            splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
+        let mut frame = Frame::for_camera(camera);
+        renderer
+            .render(cloud, &world_from_camera.inverse(), &mut frame)
+            .unwrap();
+        let (mut rays_of_pixels, mut points) = (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
+        rays(camera, &mut rays_of_pixels);
+        lift(&frame, &rays_of_pixels, &mut points);
+        (frame, points)
+    }
+
     /// The warp is its definition, point by point (`project_unbounded`, then the
     /// bilinear sample where the four neighbours are usable), to the bit: with the
     /// fixture camera and with the same camera given a lens distortion, after a motion.
@@ -230,16 +249,7 @@ mod tests {
         let pose = Isometry3::from_pose_vector([3.0, 3.0, -0.4, 0.0, 0.0, 0.0]).unwrap();
         let motion = Isometry3::from_pose_vector([0.05, -0.03, 0.02, 0.01, -0.02, 0.015]).unwrap();
         for camera in [fixture, distorted] {
-            let mut renderer =
-                splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
-            let mut frame = Frame::for_camera(&camera);
-            renderer
-                .render(&cloud, &pose.inverse(), &mut frame)
-                .unwrap();
-            let (mut rays_of_pixels, mut points) =
-                (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
-            rays(&camera, &mut rays_of_pixels);
-            lift(&frame, &rays_of_pixels, &mut points);
+            let (frame, points) = rendered_and_lifted(&cloud, &camera, &pose);
             let picture = Image::from_frame(&frame);
             let mut out = Image::new(camera.width(), camera.height());
             warp(&camera, &points, &motion, &picture, &mut out);
@@ -284,15 +294,7 @@ mod tests {
     fn the_warp_at_the_reference_is_the_picture() {
         let (cloud, camera) = plane();
         let pose = Isometry3::from_pose_vector([3.0, 3.0, -0.4, 0.0, 0.0, 0.0]).unwrap();
-        let mut renderer =
-            splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
-        let mut frame = Frame::for_camera(&camera);
-        renderer
-            .render(&cloud, &pose.inverse(), &mut frame)
-            .unwrap();
-        let (mut rays_of_pixels, mut points) = (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
-        rays(&camera, &mut rays_of_pixels);
-        lift(&frame, &rays_of_pixels, &mut points);
+        let (frame, points) = rendered_and_lifted(&cloud, &camera, &pose);
         let picture = Image::from_frame(&frame);
         let mut out = Image::new(camera.width(), camera.height());
         warp(&camera, &points, &Isometry3::IDENTITY, &picture, &mut out);
@@ -321,20 +323,9 @@ mod tests {
             Isometry3::from_pose_vector([3.0, 3.0, -0.4, 0.0, 0.0, 0.0]).unwrap();
         let world_from_camera = world_from_reference
             * Isometry3::from_pose_vector([0.05, -0.03, 0.02, 0.01, -0.02, 0.015]).unwrap();
-        let mut renderer =
-            splat::Renderer::new(camera.clone(), splat::RenderOptions::default()).unwrap();
-        let mut reference = Frame::for_camera(&camera);
-        renderer
-            .render(&cloud, &world_from_reference.inverse(), &mut reference)
-            .unwrap();
-        let mut frame = Frame::for_camera(&camera);
-        renderer
-            .render(&cloud, &world_from_camera.inverse(), &mut frame)
-            .unwrap();
+        let (reference, points) = rendered_and_lifted(&cloud, &camera, &world_from_reference);
+        let (frame, _) = rendered_and_lifted(&cloud, &camera, &world_from_camera);
         let picture = Image::from_frame(&frame);
-        let (mut rays_of_pixels, mut points) = (Vec::new(), vec![[0.0; 3]; camera.pixel_count()]);
-        rays(&camera, &mut rays_of_pixels);
-        lift(&reference, &rays_of_pixels, &mut points);
         let mut out = Image::new(camera.width(), camera.height());
         let mean_difference = |out: &Image| {
             let (mut sum, mut n) = (0.0f64, 0usize);
