@@ -6,7 +6,7 @@ use frame::AnyImage;
 use ucm::Camera;
 
 use crate::PgmError;
-use crate::convolve::{self, Kernels, Span};
+use crate::convolve::{self, Kernels, SampleRow, Span, Terms};
 use crate::recursive::{self, Mode, Recursive, Scratch, Shape, Window};
 
 /// Supported Gaussian extents, pixels.
@@ -157,8 +157,8 @@ pub struct Pgm {
     width: usize,
     height: usize,
     samples: Vec<u32>,
-    /// Per sample row, the columns spanned by its samples.
-    sample_spans: Vec<(usize, Span)>,
+    /// The rows of the samples.
+    sample_rows: Vec<SampleRow>,
     /// Per image row, the columns spanned by its valid pixels (the image and `L_I` are
     /// zero elsewhere).
     row_spans: Vec<Span>,
@@ -166,7 +166,6 @@ pub struct Pgm {
     /// it, and every sample is inside it, so the recursive passes compute it alone.
     window: Window,
     edge_distance_px: Vec<f32>,
-    // Full-image planes.
     kernels: Kernels,
     filters: Option<Filters>,
     scratch: Scratch,
@@ -176,10 +175,11 @@ pub struct Pgm {
     /// the row step `interpolation_step`.
     interpolation: Vec<Between>,
     interpolation_step: usize,
-    /// Interleaved six-channel planes of the recursive `L_G`, or the row passes of the
-    /// exact one (allocated on first use).
+    /// Interleaved six-channel planes of the recursive `L_G` (allocated on first use;
+    /// the exact path needs no plane, [`convolve::at_samples`]).
     lanes: Vec<[f32; 6]>,
     lanes_t: Vec<[f32; 6]>,
+    // Full-image planes of the recursive path.
     h_g: Vec<f32>,
     h_k2g: Vec<f32>,
     h_dg: Vec<f32>,
@@ -190,6 +190,9 @@ pub struct Pgm {
     values: Vec<f32>,
     j_lambda: Vec<f32>,
     interaction: Vec<[f32; 6]>,
+    /// The exact path's outputs at the samples before they are split (`G`, `J_λ` and
+    /// eq. (5)'s `∇G`).
+    per_sample: Vec<[f32; 4]>,
     weights: Vec<f32>,
     /// ∇G at the samples (eq. 5).
     gradient: Vec<[f32; 2]>,
@@ -330,14 +333,7 @@ impl Pgm {
             .filter(|&k| valid[k])
             .map(|k| k as u32)
             .collect();
-        let mut sample_spans: Vec<(usize, Span)> = Vec::new();
-        for &k in &samples {
-            let (x, y) = (k as usize % width, k as usize / width);
-            match sample_spans.last_mut() {
-                Some((row, span)) if *row == y => span[1] = x + 1,
-                _ => sample_spans.push((y, [x, x + 1])),
-            }
-        }
+        let sample_rows = SampleRow::of_samples(&samples, width);
         let row_spans: Vec<Span> = valid
             .chunks_exact(width)
             .map(
@@ -372,7 +368,7 @@ impl Pgm {
             width,
             height,
             samples,
-            sample_spans,
+            sample_rows,
             row_spans,
             window,
             edge_distance_px,
@@ -393,6 +389,7 @@ impl Pgm {
             values: vec![0.0; m],
             j_lambda: vec![0.0; m],
             interaction: vec![[0.0; 6]; m],
+            per_sample: vec![[0.0; 4]; m],
             weights: vec![1.0; m],
             gradient: vec![[0.0; 2]; m],
         })
@@ -445,28 +442,17 @@ impl Pgm {
             return Ok(&self.values);
         }
         let k = self.kernels(lambda);
-        let w = self.width;
-        let par = self.options.parallel;
-        convolve::rows(
-            self.brightness.image(),
-            &mut self.h_g,
-            w,
-            &k.g,
+        convolve::at_samples(
+            self.brightness.image().as_chunks::<1>().0,
+            self.width,
             &self.row_spans,
-            par,
+            &[(0, &k.g)],
+            [&[(0, &k.g)]],
+            &self.sample_rows,
+            &self.samples,
+            self.values.as_chunks_mut::<1>().0,
+            self.options.parallel,
         );
-        convolve::columns(
-            &self.h_g,
-            &mut self.out,
-            w,
-            self.height,
-            &k.g,
-            &self.sample_spans,
-            par,
-        );
-        for (v, &s) in self.values.iter_mut().zip(&self.samples) {
-            *v = self.out[s as usize];
-        }
         self.kernels = k;
         Ok(&self.values)
     }
@@ -515,97 +501,68 @@ impl Pgm {
             return Ok(());
         }
         let k = self.kernels(lambda);
-        let (w, h) = (self.width, self.height);
         let par = self.options.parallel;
-        let image = self.brightness.image();
-        convolve::rows(image, &mut self.h_g, w, &k.g, &self.row_spans, par);
-        convolve::rows(image, &mut self.h_k2g, w, &k.k2g, &self.row_spans, par);
-        // G.
-        convolve::columns(
-            &self.h_g,
-            &mut self.out,
-            w,
-            h,
-            &k.g,
-            &self.sample_spans,
-            par,
-        );
-        for (v, &s) in self.values.iter_mut().zip(&self.samples) {
-            *v = self.out[s as usize];
-        }
-        // J_λ = (1/λ³) [ (k² g)_rows g_cols + g_rows (k² g)_cols ] ⊛ I.
-        convolve::columns(
-            &self.h_k2g,
-            &mut self.out,
-            w,
-            h,
-            &k.g,
-            &self.sample_spans,
-            par,
-        );
-        convolve::add_columns(
-            &self.h_g,
-            &mut self.out,
-            w,
-            h,
-            &k.k2g,
-            &self.sample_spans,
-            par,
-        );
+        let image = self.brightness.image().as_chunks::<1>().0;
+        // The row passes of the image: g, k² g and, for eq. (5), (k/λ²) g.
+        let planes: [(usize, &[f32]); 3] = [(0, &k.g), (0, &k.k2g), (0, &k.dg)];
+        // G = g_rows g_cols; J_λ = (1/λ³) [ (k² g)_rows g_cols + g_rows (k² g)_cols ].
+        let g: Terms<'_> = &[(0, &k.g)];
+        let j: Terms<'_> = &[(1, &k.g), (0, &k.k2g)];
         let inv_l3 = 1.0 / (lambda * lambda * lambda);
-        for (j, &s) in self.j_lambda.iter_mut().zip(&self.samples) {
-            *j = self.out[s as usize] * inv_l3;
-        }
         match jacobian {
             PgmJacobian::Convolved => {
-                // Six separable convolutions of the masked per-pixel rows L_I: the six
-                // row passes together, each row of L_I read once (the channels' rows
-                // one after the other in `lanes`), then each channel's column pass.
-                self.lanes.resize(w * h, [0.0; 6]);
-                let rows = self.lanes.as_flattened_mut();
-                let li = self.brightness.pixel_interaction();
-                convolve::rows_interleaved(li, rows, w, &k.g, &self.row_spans, par);
-                for c in 0..6 {
-                    convolve::columns_of(
-                        self.lanes.as_flattened(),
-                        [c * w, 6 * w],
-                        &mut self.out,
-                        w,
-                        h,
-                        &k.g,
-                        &self.sample_spans,
-                        par,
-                    );
-                    for (l, &s) in self.interaction.iter_mut().zip(&self.samples) {
-                        l[c] = self.out[s as usize];
-                    }
+                let m = self.samples.len();
+                let gj = &mut self.per_sample.as_flattened_mut().as_chunks_mut::<2>().0[..m];
+                let (w, spans, rows) = (self.width, &self.row_spans, &self.sample_rows);
+                let (planes, samples) = (&planes[..2], &self.samples);
+                convolve::at_samples(image, w, spans, planes, [g, j], rows, samples, gj, par);
+                let per_sample = self.values.iter_mut().zip(&mut self.j_lambda).zip(gj);
+                for ((v, jl), &mut [gs, js]) in per_sample {
+                    (*v, *jl) = (gs, js * inv_l3);
                 }
+                // Six separable convolutions of the masked per-pixel rows L_I, each row
+                // of L_I read once.
+                let li = self.brightness.pixel_interaction();
+                let planes: [(usize, &[f32]); 6] = std::array::from_fn(|c| (c, &k.g[..]));
+                let terms: [[(usize, &[f32]); 1]; 6] = std::array::from_fn(|c| [(c, &k.g[..])]);
+                let outputs: [Terms<'_>; 6] = std::array::from_fn(|c| &terms[c][..]);
+                convolve::at_samples(
+                    li,
+                    w,
+                    spans,
+                    &planes,
+                    outputs,
+                    rows,
+                    samples,
+                    &mut self.interaction,
+                    par,
+                );
                 self.weights.fill(1.0);
             }
             PgmJacobian::Paper { edge_margin } => {
                 // ∇G at the samples: ∂G/∂u = (dg rows, g cols), ∂G/∂v = (g rows, dg cols).
-                let image = self.brightness.image();
-                convolve::rows(image, &mut self.h_dg, w, &k.dg, &self.row_spans, par);
-                convolve::columns(
-                    &self.h_dg,
-                    &mut self.out,
-                    w,
-                    h,
-                    &k.g,
-                    &self.sample_spans,
+                let du: Terms<'_> = &[(2, &k.g)];
+                let dv: Terms<'_> = &[(0, &k.dg)];
+                let out = &mut self.per_sample[..];
+                convolve::at_samples(
+                    image,
+                    self.width,
+                    &self.row_spans,
+                    &planes,
+                    [g, j, du, dv],
+                    &self.sample_rows,
+                    &self.samples,
+                    out,
                     par,
                 );
-                convolve::columns(
-                    &self.h_g,
-                    &mut self.out2,
-                    w,
-                    h,
-                    &k.dg,
-                    &self.sample_spans,
-                    par,
-                );
-                for (g, &s) in self.gradient.iter_mut().zip(&self.samples) {
-                    *g = [self.out[s as usize], self.out2[s as usize]];
+                let per_sample = self
+                    .values
+                    .iter_mut()
+                    .zip(&mut self.j_lambda)
+                    .zip(&mut self.gradient)
+                    .zip(out.iter());
+                for (((v, jl), gr), &[gs, js, gu, gv]) in per_sample {
+                    (*v, *jl, *gr) = (gs, js * inv_l3, [gu, gv]);
                 }
                 self.paper_interaction(lambda, edge_margin);
             }

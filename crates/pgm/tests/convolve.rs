@@ -1,7 +1,9 @@
 //! The correlations against the textbook loops, bit for bit: skipping the zero inputs
 //! outside each row's span and writing only the wanted spans changes no value.
 
-use pgm::convolve::{Span, add_columns, columns, columns_of, rows, rows_interleaved};
+use pgm::convolve::{
+    SampleRow, Span, add_columns, at_samples, columns, columns_of, rows, rows_interleaved,
+};
 use proptest::prelude::*;
 
 /// One output at a time over the whole row, taps in order, zero padding.
@@ -133,6 +135,67 @@ proptest! {
             let mut got = vec![1.0f32; width * height];
             columns_of(&together, [c * width, 3 * width], &mut got, width, height, &kernel, &wanted, parallel);
             prop_assert!(got.iter().zip(&expected).all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+    }
+
+    /// The correlations at the samples, row by row from a ring of row passes, give the
+    /// bits of the whole-image passes at every sample: two channels, three row passes
+    /// of any radii, outputs of one and of two terms of any column radii, any samples,
+    /// in one band or several.
+    #[test]
+    fn correlations_at_samples_equal_the_whole_image_passes(
+        width in 1usize..50,
+        // Past two bands of rows: split over threads when parallel.
+        height in 1usize..150,
+        radii in proptest::array::uniform6(0usize..10),
+        seed in any::<u64>(),
+        keep in 0.05f64..1.0,
+        parallel in any::<bool>(),
+    ) {
+        let mut rng = Lcg(seed);
+        let spans = random_spans(&mut rng, width, height);
+        let mut src = vec![[0.0f32; 2]; width * height];
+        for (y, &[a, b]) in spans.iter().enumerate() {
+            for v in &mut src[y * width + a..y * width + b] {
+                *v = [0; 2].map(|_| rng.uniform(-1.0, 1.0) as f32);
+            }
+        }
+        let kernels: Vec<Vec<f32>> = radii
+            .iter()
+            .map(|&r| (0..2 * r + 1).map(|_| rng.uniform(-1.0, 1.0) as f32).collect())
+            .collect();
+        let samples: Vec<u32> = (0..(width * height) as u32).filter(|_| rng.unit() < keep).collect();
+        let sample_rows = SampleRow::of_samples(&samples, width);
+        let planes: [(usize, &[f32]); 3] = [(1, &kernels[0]), (0, &kernels[1]), (1, &kernels[2])];
+        let first: &[(usize, &[f32])] = &[(2, &kernels[3])];
+        let second: &[(usize, &[f32])] = &[(0, &kernels[4]), (1, &kernels[5])];
+        let mut got = vec![[f32::NAN; 2]; samples.len()];
+        at_samples(&src, width, &spans, &planes, [first, second], &sample_rows, &samples, &mut got, parallel);
+
+        let passes: Vec<Vec<f32>> = planes
+            .iter()
+            .map(|&(c, kernel)| {
+                let channel: Vec<f32> = src.iter().map(|v| v[c]).collect();
+                let mut out = vec![0.0f32; width * height];
+                rows(&channel, &mut out, width, kernel, &spans, parallel);
+                out
+            })
+            .collect();
+        let wanted: Vec<(usize, Span)> = sample_rows.iter().map(|r| (r.y, r.span)).collect();
+        let mut expected = [vec![f32::NAN; width * height], vec![f32::NAN; width * height]];
+        for (out, terms) in expected.iter_mut().zip([first, second]) {
+            for (i, &(p, kernel)) in terms.iter().enumerate() {
+                if i == 0 {
+                    columns(&passes[p], out, width, height, kernel, &wanted, parallel);
+                } else {
+                    add_columns(&passes[p], out, width, height, kernel, &wanted, parallel);
+                }
+            }
+        }
+        for (g, &k) in got.iter().zip(&samples) {
+            for o in 0..2 {
+                prop_assert_eq!(g[o].to_bits(), expected[o][k as usize].to_bits());
+            }
         }
     }
 }
