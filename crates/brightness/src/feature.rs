@@ -16,6 +16,10 @@ struct Tables {
     gradient_plan: MaskedGradient,
     /// `[start, end)` row-major runs of valid pixels.
     valid_runs: Vec<[u32; 2]>,
+    /// Per image row, its runs (indices in `valid_runs`: the runs end at the rows'
+    /// ends), and per run, where its factors start in `factors_u` and `factors_v`.
+    row_runs: Vec<[u32; 2]>,
+    run_factors: Vec<u32>,
     /// The rows `[T_u | R_u]` and `[T_v | R_v]` of the valid pixels' factors
     /// ([`PixelGrid::factors`]), one run after the other: what the interaction rows
     /// read, contiguous.
@@ -93,12 +97,25 @@ impl Brightness {
             .collect();
         let (width, height) = (camera.width() as usize, camera.height() as usize);
         let gradient_plan = MaskedGradient::new(grid.valid(), width, height);
+        // Runs of consecutive valid pixels of one row (the samples in their order).
         let mut valid_runs: Vec<[u32; 2]> = Vec::new();
         for &k in &samples {
             match valid_runs.last_mut() {
-                Some(run) if run[1] == k => run[1] += 1,
+                Some(run) if run[1] == k && !(k as usize).is_multiple_of(width) => run[1] += 1,
                 _ => valid_runs.push([k, k + 1]),
             }
+        }
+        let mut row_runs = vec![[0u32; 2]; height];
+        let mut run_factors = Vec::with_capacity(valid_runs.len());
+        let mut first = 0;
+        for (i, &[start, end]) in valid_runs.iter().enumerate() {
+            let y = start as usize / width.max(1);
+            if row_runs[y][1] == 0 {
+                row_runs[y] = [i as u32, i as u32];
+            }
+            row_runs[y][1] = i as u32 + 1;
+            run_factors.push(first);
+            first += end - start;
         }
         let (factors_u, factors_v) = samples
             .iter()
@@ -108,6 +125,8 @@ impl Brightness {
             grid,
             gradient_plan,
             valid_runs,
+            row_runs,
+            run_factors,
             factors_u,
             factors_v,
             width,
@@ -161,7 +180,7 @@ impl Brightness {
     /// at the region's); sky pixels, and every pixel of a measured image, have
     /// `1/ρ = 0`.
     pub fn compute(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
-        self.compute_pixels(picture)?;
+        self.compute_pixels(picture, PixelRows::Stored)?;
         for (s, &k) in self.tables.samples.iter().enumerate() {
             self.values[s] = self.image[k as usize];
             self.interaction[s] = self.pixel_interaction[k as usize];
@@ -170,12 +189,20 @@ impl Brightness {
     }
 
     /// The per-pixel part of [`Brightness::compute`] only: [`Brightness::image`],
-    /// [`Brightness::inverse_range`], [`Brightness::gradient`] and
+    /// [`Brightness::inverse_range`], [`Brightness::gradient`] and, as `rows` asks,
     /// [`Brightness::pixel_interaction`], what a feature of the whole image (the PGM)
     /// reads. [`Brightness::values`] and [`Brightness::interaction`] keep what the
     /// last [`Brightness::compute`] gave.
-    pub fn compute_pixels(&mut self, picture: &impl AnyImage) -> Result<(), BrightnessError> {
-        self.checked_pixels(picture, Outputs::Derivatives)
+    pub fn compute_pixels(
+        &mut self,
+        picture: &impl AnyImage,
+        rows: PixelRows,
+    ) -> Result<(), BrightnessError> {
+        let outputs = match rows {
+            PixelRows::Stored => Outputs::Derivatives,
+            PixelRows::OnDemand => Outputs::Gradient,
+        };
+        self.checked_pixels(picture, outputs)
     }
 
     /// The image part of [`Brightness::compute_pixels`] only: [`Brightness::image`]
@@ -232,7 +259,7 @@ impl Brightness {
         rendering: &impl AnyImage,
         against: Against<'_>,
     ) -> Result<(), BrightnessError> {
-        self.compute_pixels_against(rendering, against)?;
+        self.compute_pixels_against(rendering, against, PixelRows::Stored)?;
         for (s, &k) in self.tables.samples.iter().enumerate() {
             self.values[s] = self.image[k as usize];
             self.interaction[s] = self.pixel_interaction[k as usize];
@@ -246,6 +273,7 @@ impl Brightness {
         &mut self,
         rendering: &impl AnyImage,
         against: Against<'_>,
+        rows: PixelRows,
     ) -> Result<(), BrightnessError> {
         let n = self.tables.width * self.tables.height;
         for (what, got) in [
@@ -267,6 +295,7 @@ impl Brightness {
         isa::arch().dispatch(EdgeOfSupport {
             brightness: self,
             against,
+            rows,
         });
         Ok(())
     }
@@ -274,7 +303,7 @@ impl Brightness {
     /// The interaction rows of [`Brightness::compute_against`], after
     /// [`Brightness::compute_image`] of the rendering on the compared pixels.
     #[inline(always)]
-    fn edge_of_support(&mut self, against: Against<'_>) {
+    fn edge_of_support(&mut self, against: Against<'_>, rows: PixelRows) {
         let (w, h, n) = (
             self.tables.width,
             self.tables.height,
@@ -343,7 +372,9 @@ impl Brightness {
                 }
             }
         }
-        self.rows();
+        if rows == PixelRows::Stored {
+            self.rows();
+        }
     }
 
     /// The body of [`Brightness::compute_pixels`], [`Brightness::compute_image`] and
@@ -353,7 +384,8 @@ impl Brightness {
     fn pixels(&mut self, picture: &impl AnyImage, outputs: Outputs) {
         let valid = self.tables.grid.valid();
         let ranges = outputs >= Outputs::Ranges;
-        let derivatives = outputs == Outputs::Derivatives;
+        let derivatives = outputs >= Outputs::Gradient;
+        let rows = outputs == Outputs::Derivatives;
         if ranges {
             picture
                 .inverse_range(&mut self.inverse_range)
@@ -379,7 +411,7 @@ impl Brightness {
         self.scale = 1.0;
         self.mean = 0.0;
         if !all_observed {
-            self.partly_observed(derivatives);
+            self.partly_observed(derivatives, rows);
             return;
         }
         if self.normalize {
@@ -409,14 +441,16 @@ impl Brightness {
         self.tables
             .gradient_plan
             .compute(&self.image, valid, &mut self.gradient);
-        self.rows();
+        if rows {
+            self.rows();
+        }
     }
 
     /// [`Brightness::pixels`] for a picture that does not hold an intensity at every
     /// pixel of the region: the normalisation over the observed pixels only, the
     /// others 0, the gradient inside the observed pixels.
     #[inline(always)]
-    fn partly_observed(&mut self, derivatives: bool) {
+    fn partly_observed(&mut self, derivatives: bool, rows: bool) {
         if self.normalize {
             // Run by run, as in `pixels`.
             let (tables, image, observed) = (&self.tables, &self.image, &self.observed);
@@ -460,7 +494,9 @@ impl Brightness {
                 *g = if o { *g } else { [0.0; 2] };
             }
         }
-        self.rows();
+        if rows {
+            self.rows();
+        }
     }
 
     /// Every valid pixel's interaction row from [`Brightness::gradient`] and
@@ -478,6 +514,34 @@ impl Brightness {
                 out: &mut self.pixel_interaction[run],
             });
             first += n;
+        }
+    }
+
+    /// The interaction rows of image row `y` into `out` (`width` of them; zero outside
+    /// the region): what [`Brightness::pixel_interaction`] holds there after a
+    /// computation that stores them, the same bits, from the last computation's
+    /// gradient and inverse ranges (one with [`PixelRows::OnDemand`] too).
+    ///
+    /// # Panics
+    /// If `y` is not a row of the image or `out` is not `width` long.
+    pub fn interaction_row(&self, y: usize, out: &mut [[f32; 6]]) {
+        let w = self.tables.width;
+        assert!(
+            y < self.tables.height && out.len() == w,
+            "a row of the image"
+        );
+        out.fill([0.0; 6]);
+        let [first, end] = self.tables.row_runs[y];
+        for i in first as usize..end as usize {
+            let [start, stop] = self.tables.valid_runs[i].map(|k| k as usize);
+            let (f, n) = (self.tables.run_factors[i] as usize, stop - start);
+            photometric::rows(photometric::Run {
+                u: &self.tables.factors_u[f..f + n],
+                v: &self.tables.factors_v[f..f + n],
+                gradient: &self.gradient[start..stop],
+                inverse_range: &self.inverse_range[start..stop],
+                out: &mut out[start - y * w..stop - y * w],
+            });
         }
     }
 
@@ -574,14 +638,30 @@ enum Outputs {
     Image,
     /// And the inverse ranges.
     Ranges,
-    /// And the gradient and the interaction rows.
+    /// And the gradient.
+    Gradient,
+    /// And the interaction rows.
     Derivatives,
+}
+
+/// Whether a per-pixel computation ([`Brightness::compute_pixels`],
+/// [`Brightness::compute_pixels_against`]) stores every pixel's interaction row.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PixelRows {
+    /// Stored: [`Brightness::pixel_interaction`].
+    Stored,
+    /// Left to [`Brightness::interaction_row`], a row at a time where they are needed
+    /// (a feature that filters them row by row: the PGM's exact `L_G`);
+    /// [`Brightness::pixel_interaction`] keeps what the last computation with them
+    /// gave.
+    OnDemand,
 }
 
 /// [`Brightness::edge_of_support`] as a `pulp` kernel.
 struct EdgeOfSupport<'a> {
     brightness: &'a mut Brightness,
     against: Against<'a>,
+    rows: PixelRows,
 }
 
 impl pulp::WithSimd for EdgeOfSupport<'_> {
@@ -589,7 +669,7 @@ impl pulp::WithSimd for EdgeOfSupport<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.brightness.edge_of_support(self.against);
+        self.brightness.edge_of_support(self.against, self.rows);
     }
 }
 

@@ -8,6 +8,6 @@ mod normal;
 mod photometric;
 
 pub use error::BrightnessError;
-pub use feature::{Against, Brightness};
+pub use feature::{Against, Brightness, PixelRows};
 pub use gradient::masked_gradient;
 pub use normal::{normal_equations, normal_equations_with_column};

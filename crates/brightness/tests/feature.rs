@@ -1,4 +1,4 @@
-use brightness::{Brightness, masked_gradient, normal_equations};
+use brightness::{Brightness, PixelRows, masked_gradient, normal_equations};
 use frame::{Frame, PixelStatus};
 use proptest::prelude::*;
 use ucm::{Camera, Intrinsics, PixelGrid, ValidRegion};
@@ -309,9 +309,9 @@ fn the_image_alone_is_the_image_of_the_whole_computation() {
         for observed in [&hits, &all] {
             let view = Restricted::new(&frame, observed).unwrap();
             let mut whole = Brightness::new(&camera).with_normalization(normalize);
-            whole.compute_pixels(&view).unwrap();
+            whole.compute_pixels(&view, PixelRows::Stored).unwrap();
             let mut image = Brightness::new(&camera).with_normalization(normalize);
-            image.compute_pixels(&other).unwrap();
+            image.compute_pixels(&other, PixelRows::Stored).unwrap();
             let (ranges, gradient, rows) = (
                 image.inverse_range().to_vec(),
                 image.gradient().to_vec(),
@@ -327,6 +327,77 @@ fn the_image_alone_is_the_image_of_the_whole_computation() {
             assert_eq!(image.gradient(), &gradient[..]);
             assert_eq!(image.pixel_interaction(), &rows[..]);
             assert_ne!(image.gradient(), whole.gradient());
+        }
+    }
+}
+
+/// Rows computed on demand (`interaction_row`) are the stored rows, bit for bit, after
+/// a computation that stores them or one that does not, of a partly observed picture
+/// or a whole one, against a picture or not, normalised or not.
+#[test]
+fn rows_on_demand_are_the_stored_rows() {
+    use brightness::Against;
+    use frame::Restricted;
+    let (camera, frame) = holed_scene();
+    let (w, h) = (64, 48);
+    let hits = hits(&frame);
+    let all = vec![true; hits.len()];
+    let picture: Vec<f32> = (0..w * h).map(|k| 0.3 + 0.01 * (k % 11) as f32).collect();
+    let against = Against {
+        intensity: &picture,
+        observed: camera.valid_pixels(),
+    };
+    let on_demand_rows = |b: &Brightness| {
+        let mut rows = vec![[f32::NAN; 6]; w * h];
+        for (y, row) in rows.chunks_exact_mut(w).enumerate() {
+            b.interaction_row(y, row);
+        }
+        rows
+    };
+    let bits = |rows: &[[f32; 6]]| {
+        rows.iter()
+            .flatten()
+            .map(|v| v.to_bits())
+            .collect::<Vec<_>>()
+    };
+    for normalize in [false, true] {
+        for observed in [&hits, &all] {
+            let view = Restricted::new(&frame, observed).unwrap();
+            for with_picture in [false, true] {
+                let compute = |b: &mut Brightness, rows| {
+                    if with_picture {
+                        b.compute_pixels_against(&view, against, rows).unwrap();
+                    } else {
+                        b.compute_pixels(&view, rows).unwrap();
+                    }
+                };
+                let mut stored = Brightness::new(&camera).with_normalization(normalize);
+                compute(&mut stored, PixelRows::Stored);
+                let mut deferred = Brightness::new(&camera).with_normalization(normalize);
+                compute(&mut deferred, PixelRows::OnDemand);
+                assert!(
+                    deferred
+                        .pixel_interaction()
+                        .iter()
+                        .flatten()
+                        .all(|&v| v == 0.0)
+                );
+                assert_eq!(
+                    bits(&on_demand_rows(&stored)),
+                    bits(stored.pixel_interaction())
+                );
+                assert_eq!(
+                    bits(&on_demand_rows(&deferred)),
+                    bits(stored.pixel_interaction())
+                );
+                assert!(
+                    stored
+                        .pixel_interaction()
+                        .iter()
+                        .flatten()
+                        .any(|&v| v != 0.0)
+                );
+            }
         }
     }
 }

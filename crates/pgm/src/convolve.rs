@@ -391,13 +391,37 @@ impl SampleRow {
     }
 }
 
+/// The input rows of [`at_samples`], one image row at a time.
+pub trait RowSource<const C: usize>: Sync {
+    /// Row `y`: borrowed, or computed into `buffer` (a row's `width` vectors).
+    fn row<'a>(&'a self, y: usize, buffer: &'a mut [[f32; C]]) -> &'a [[f32; C]];
+}
+
+/// An image of `C`-vectors as a [`RowSource`]: its rows, `width` vectors each.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageRows<'a, const C: usize> {
+    /// The image, row-major.
+    pub image: &'a [[f32; C]],
+    /// Its width.
+    pub width: usize,
+}
+
+impl<const C: usize> RowSource<C> for ImageRows<'_, C> {
+    #[inline(always)]
+    fn row<'a>(&'a self, y: usize, _: &'a mut [[f32; C]]) -> &'a [[f32; C]] {
+        &self.image[y * self.width..(y + 1) * self.width]
+    }
+}
+
 /// A sum of column correlations of row passes ([`at_samples`]): each term is a row
 /// pass's index in `planes` and the column kernel applied to it, added in order.
 pub type Terms<'a> = &'a [(usize, &'a [f32])];
 
 /// Separable correlations at the samples only, row after row, with the bits of the
-/// whole-image passes: each of `planes` is [`rows`] of a channel of `src` (`(channel,
-/// row kernel)`, `spans` as for [`rows_interleaved`]) and output `o` at a sample is the
+/// whole-image passes: each of `planes` is [`rows`] of a channel of the image whose
+/// rows `src` gives (`(channel, row kernel)`, `spans` as for [`rows_interleaved`],
+/// each row asked for once, or twice at the edge of two bands) and output `o` at a
+/// sample is the
 /// sum of `outputs[o]`'s terms: [`columns_of`] of the first term's plane, then
 /// [`add_columns`]'s additions of the next ones, every tap in order. `dst[s][o]` is
 /// output `o` at `samples[s]`; `sample_rows` are [`SampleRow::of_samples`].
@@ -411,12 +435,12 @@ pub type Terms<'a> = &'a [(usize, &'a [f32])];
 /// the result does not depend on the thread count.
 ///
 /// # Panics
-/// If `src` is not `width × spans.len()` vectors, `dst` is shorter than the samples, a
+/// If a row of `src` is not `width` vectors, `dst` is shorter than the samples, a
 /// plane names a channel beyond `C`, a term a plane beyond `planes`, or a kernel has an
 /// even length.
 #[allow(clippy::too_many_arguments)]
 pub fn at_samples<const C: usize, const O: usize>(
-    src: &[[f32; C]],
+    src: &impl RowSource<C>,
     width: usize,
     spans: &[Span],
     planes: &[(usize, &[f32])],
@@ -426,8 +450,6 @@ pub fn at_samples<const C: usize, const O: usize>(
     dst: &mut [[f32; O]],
     parallel: bool,
 ) {
-    let height = spans.len();
-    assert_eq!(src.len(), width * height, "an image of width × spans.len()");
     assert!(dst.len() >= samples.len(), "an output per sample");
     assert!(planes.iter().all(|&(c, k)| c < C && k.len() % 2 == 1));
     assert!(
@@ -464,9 +486,8 @@ pub fn at_samples<const C: usize, const O: usize>(
 const BAND_ROWS: usize = 32;
 
 /// What every band of [`at_samples`] shares.
-#[derive(Clone, Copy)]
-struct Band<'a, const C: usize, const O: usize> {
-    src: &'a [[f32; C]],
+struct Band<'a, R, const C: usize, const O: usize> {
+    src: &'a R,
     width: usize,
     spans: &'a [Span],
     planes: &'a [(usize, &'a [f32])],
@@ -476,14 +497,24 @@ struct Band<'a, const C: usize, const O: usize> {
     samples: &'a [u32],
 }
 
-thread_local! {
-    /// The ring of row passes of [`at_samples`] (`planes × (2 radius + 1)` rows), the
-    /// zero-padded input row of its row passes and its output rows, per thread.
-    static RING: std::cell::RefCell<([Vec<f32>; 3], Vec<usize>)> =
-        const { std::cell::RefCell::new(([Vec::new(), Vec::new(), Vec::new()], Vec::new())) };
+impl<R, const C: usize, const O: usize> Clone for Band<'_, R, C, O> {
+    fn clone(&self) -> Self {
+        *self
+    }
 }
 
-impl<const C: usize, const O: usize> Band<'_, C, O> {
+impl<R, const C: usize, const O: usize> Copy for Band<'_, R, C, O> {}
+
+thread_local! {
+    /// The ring of row passes of [`at_samples`] (`planes × (2 radius + 1)` rows), the
+    /// zero-padded input row of its row passes, its output rows and the buffer of a
+    /// computed input row, per thread.
+    static RING: std::cell::RefCell<([Vec<f32>; 4], Vec<usize>)> = const {
+        std::cell::RefCell::new(([Vec::new(), Vec::new(), Vec::new(), Vec::new()], Vec::new()))
+    };
+}
+
+impl<R: RowSource<C>, const C: usize, const O: usize> Band<'_, R, C, O> {
     /// The rows `rows` (writing `dst`, from their first sample), cut in halves on
     /// rayon's threads down to [`BAND_ROWS`] rows.
     fn split(self, rows: &[SampleRow], dst: &mut [[f32; O]]) {
@@ -507,7 +538,7 @@ impl<const C: usize, const O: usize> Band<'_, C, O> {
         };
         let (w, ring_rows) = (self.width, 2 * self.radius + 1);
         let longest = self.planes.iter().map(|(_, k)| k.len()).max().unwrap_or(1);
-        RING.with_borrow_mut(|([ring, pad, line], starts)| {
+        RING.with_borrow_mut(|([ring, pad, line, input], starts)| {
             let ring_len = self.planes.len() * ring_rows * w;
             if ring.len() < ring_len {
                 ring.resize(ring_len, 0.0);
@@ -518,6 +549,9 @@ impl<const C: usize, const O: usize> Band<'_, C, O> {
             if line.len() < O * w {
                 line.resize(O * w, 0.0);
             }
+            if input.len() < C * w {
+                input.resize(C * w, 0.0);
+            }
             starts.resize(ring_rows, 0);
             crate::simd::on_widest(BandOp {
                 band: self,
@@ -527,6 +561,7 @@ impl<const C: usize, const O: usize> Band<'_, C, O> {
                 ring,
                 pad,
                 line,
+                input: &mut input.as_chunks_mut::<C>().0[..w],
                 starts,
             });
         });
@@ -535,8 +570,8 @@ impl<const C: usize, const O: usize> Band<'_, C, O> {
 
 /// [`Band::run`]'s loops, a [`crate::simd::Kernel`] (compiled for the widest
 /// instruction set).
-struct BandOp<'a, const C: usize, const O: usize> {
-    band: Band<'a, C, O>,
+struct BandOp<'a, R, const C: usize, const O: usize> {
+    band: Band<'a, R, C, O>,
     rows: &'a [SampleRow],
     dst: &'a mut [[f32; O]],
     /// The sample `dst[0]` is.
@@ -544,12 +579,14 @@ struct BandOp<'a, const C: usize, const O: usize> {
     ring: &'a mut [f32],
     pad: &'a mut [f32],
     line: &'a mut [f32],
+    /// Where a computed input row is written.
+    input: &'a mut [[f32; C]],
     /// Where the rows `y − radius ..= y + radius` of an output row `y` start in the
     /// ring (plane 0's; the others' `p · (2 radius + 1) · width` further).
     starts: &'a mut [usize],
 }
 
-impl<const C: usize, const O: usize> crate::simd::Kernel for BandOp<'_, C, O> {
+impl<R: RowSource<C>, const C: usize, const O: usize> crate::simd::Kernel for BandOp<'_, R, C, O> {
     #[inline(always)]
     fn run<S: pulp::Simd>(self, _: S) {
         let Self {
@@ -560,6 +597,7 @@ impl<const C: usize, const O: usize> crate::simd::Kernel for BandOp<'_, C, O> {
             ring,
             pad,
             line,
+            input,
             starts,
         } = self;
         let (w, h, r) = (band.width, band.spans.len(), band.radius);
@@ -572,7 +610,8 @@ impl<const C: usize, const O: usize> crate::simd::Kernel for BandOp<'_, C, O> {
         for (i, row) in rows.iter().enumerate() {
             let y = row.y;
             for j in y.saturating_sub(r).max(next)..(y + r + 1).min(h) {
-                let input = &band.src[j * w..(j + 1) * w];
+                let input = band.src.row(j, input);
+                assert_eq!(input.len(), w, "a row of the image");
                 for (p, &(c, kernel)) in band.planes.iter().enumerate() {
                     let d = &mut ring[at(p, j)..at(p, j) + w];
                     row_inline(Channel(input, c), d, w, kernel, band.spans[j], pad);

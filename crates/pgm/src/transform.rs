@@ -1,12 +1,12 @@
 //! [`Pgm`]: the photometric Gaussian mixture of an omnidirectional image, its
 //! λ-derivative and its interaction matrix, on a fixed sample grid.
 
-use brightness::{Against, Brightness};
+use brightness::{Against, Brightness, PixelRows};
 use frame::AnyImage;
 use ucm::Camera;
 
 use crate::PgmError;
-use crate::convolve::{self, Kernels, SampleRow, Span, Terms};
+use crate::convolve::{self, ImageRows, Kernels, RowSource, SampleRow, Span, Terms};
 use crate::recursive::{self, Mode, Recursive, Scratch, Shape, Window};
 
 /// Supported Gaussian extents, pixels.
@@ -196,6 +196,18 @@ pub struct Pgm {
     weights: Vec<f32>,
     /// ∇G at the samples (eq. 5).
     gradient: Vec<[f32; 2]>,
+}
+
+/// The brightness's interaction rows `L_I`, computed a row at a time
+/// ([`Brightness::interaction_row`]).
+struct Interaction<'a>(&'a Brightness);
+
+impl RowSource<6> for Interaction<'_> {
+    #[inline(always)]
+    fn row<'a>(&'a self, y: usize, buffer: &'a mut [[f32; 6]]) -> &'a [[f32; 6]] {
+        self.0.interaction_row(y, buffer);
+        buffer
+    }
 }
 
 /// How a run of samples is interpolated from the rows kept by `L_G`'s vertical pass:
@@ -443,7 +455,10 @@ impl Pgm {
         }
         let k = self.kernels(lambda);
         convolve::at_samples(
-            self.brightness.image().as_chunks::<1>().0,
+            &ImageRows {
+                image: self.brightness.image().as_chunks::<1>().0,
+                width: self.width,
+            },
             self.width,
             &self.row_spans,
             &[(0, &k.g)],
@@ -465,7 +480,8 @@ impl Pgm {
         jacobian: PgmJacobian,
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute_pixels(picture)?;
+        let rows = self.pixel_rows(lambda, jacobian);
+        self.brightness.compute_pixels(picture, rows)?;
         self.features(lambda, jacobian)
     }
 
@@ -482,8 +498,22 @@ impl Pgm {
         jacobian: PgmJacobian,
     ) -> Result<(), PgmError> {
         Self::check_lambda(lambda)?;
-        self.brightness.compute_pixels_against(rendering, against)?;
+        let rows = self.pixel_rows(lambda, jacobian);
+        self.brightness
+            .compute_pixels_against(rendering, against, rows)?;
         self.features(lambda, jacobian)
+    }
+
+    /// Whether the features at `lambda` read the brightness's stored interaction rows:
+    /// only the recursive `L_G` does; the exact one filters them a row at a time as it
+    /// computes them, eq. (5) reads none.
+    fn pixel_rows(&self, lambda: f32, jacobian: PgmJacobian) -> PixelRows {
+        let recursive = lambda >= self.options.recursive_from_lambda;
+        if recursive && jacobian == PgmJacobian::Convolved {
+            PixelRows::Stored
+        } else {
+            PixelRows::OnDemand
+        }
     }
 
     /// `G`, `J_λ` and `L_G` of the brightness's last picture.
@@ -502,7 +532,10 @@ impl Pgm {
         }
         let k = self.kernels(lambda);
         let par = self.options.parallel;
-        let image = self.brightness.image().as_chunks::<1>().0;
+        let image = &ImageRows {
+            image: self.brightness.image().as_chunks::<1>().0,
+            width: self.width,
+        };
         // The row passes of the image: g, k² g and, for eq. (5), (k/λ²) g.
         let planes: [(usize, &[f32]); 3] = [(0, &k.g), (0, &k.k2g), (0, &k.dg)];
         // G = g_rows g_cols; J_λ = (1/λ³) [ (k² g)_rows g_cols + g_rows (k² g)_cols ].
@@ -521,8 +554,8 @@ impl Pgm {
                     (*v, *jl) = (gs, js * inv_l3);
                 }
                 // Six separable convolutions of the masked per-pixel rows L_I, each row
-                // of L_I read once.
-                let li = self.brightness.pixel_interaction();
+                // of L_I computed once, as the row passes need it.
+                let li = &Interaction(&self.brightness);
                 let planes: [(usize, &[f32]); 6] = std::array::from_fn(|c| (c, &k.g[..]));
                 let terms: [[(usize, &[f32]); 1]; 6] = std::array::from_fn(|c| [(c, &k.g[..])]);
                 let outputs: [Terms<'_>; 6] = std::array::from_fn(|c| &terms[c][..]);

@@ -2,7 +2,8 @@
 //! outside each row's span and writing only the wanted spans changes no value.
 
 use pgm::convolve::{
-    SampleRow, Span, add_columns, at_samples, columns, columns_of, rows, rows_interleaved,
+    ImageRows, SampleRow, Span, add_columns, at_samples, columns, columns_of, rows,
+    rows_interleaved,
 };
 use proptest::prelude::*;
 
@@ -170,7 +171,8 @@ proptest! {
         let first: &[(usize, &[f32])] = &[(2, &kernels[3])];
         let second: &[(usize, &[f32])] = &[(0, &kernels[4]), (1, &kernels[5])];
         let mut got = vec![[f32::NAN; 2]; samples.len()];
-        at_samples(&src, width, &spans, &planes, [first, second], &sample_rows, &samples, &mut got, parallel);
+        let image = ImageRows { image: &src, width };
+        at_samples(&image, width, &spans, &planes, [first, second], &sample_rows, &samples, &mut got, parallel);
 
         let passes: Vec<Vec<f32>> = planes
             .iter()
