@@ -25,6 +25,9 @@ use crate::{Method, Outcome, StopReason, VvsConfig, VvsError};
 /// sixteenth of an 8-bit level).
 const UNIFORM_INTENSITY_RANGE: f32 = 1.0 / (255.0 * 16.0);
 
+/// Pixels of the desired picture checked at a time ([`Servo::check_inputs`]).
+const CHECK_BLOCK: usize = 256;
+
 /// The most pixels a camera may have for [`Servo`]: its buffers (renderings, features,
 /// interaction rows, pyramid levels) take about [`SERVO_BYTES_PER_PIXEL`] bytes a pixel,
 /// so 2²² pixels (2048 × 2048) take about 1 GB. Larger pictures are refused
@@ -194,18 +197,38 @@ impl<'a> Servo<'a> {
         }
         // A picture with nothing to align to (black, white, cut to one value) is an
         // input error, not a localisation that stalls at a pose.
+        // Blocks of pixels without a branch (a picture is checked at every localisation
+        // and every tracked frame); the first pixel that is not finite looked for only
+        // if there is one.
         let (mut low, mut high, mut observed) = (f32::INFINITY, f32::NEG_INFINITY, 0usize);
+        let mut finite = true;
         let intensity = desired.intensity();
-        for (index, &valid) in self.camera.valid_pixels().iter().enumerate() {
-            if valid && desired.is_observed(index) {
-                let value = intensity[index];
-                if !value.is_finite() {
-                    return Err(VvsError::NonFiniteDesired { index });
-                }
-                low = low.min(value);
-                high = high.max(value);
-                observed += 1;
+        let valid = self.camera.valid_pixels();
+        let mut flags = [false; CHECK_BLOCK];
+        for start in (0..valid.len()).step_by(CHECK_BLOCK) {
+            let end = (start + CHECK_BLOCK).min(valid.len());
+            let flags = &mut flags[..end - start];
+            desired.observed(start..end, flags);
+            let pixels = flags
+                .iter()
+                .zip(&valid[start..end])
+                .zip(&intensity[start..end]);
+            let mut seen_here = 0u32;
+            for ((&o, &v), &value) in pixels {
+                // Comparisons and selections, which vectorise (`f32::min` does not).
+                let seen = o & v;
+                finite &= !seen | value.is_finite();
+                low = if seen & (value < low) { value } else { low };
+                high = if seen & (value > high) { value } else { high };
+                seen_here += u32::from(seen);
             }
+            observed += seen_here as usize;
+        }
+        if !finite {
+            let index = (0..valid.len())
+                .find(|&k| valid[k] && desired.is_observed(k) && !intensity[k].is_finite())
+                .unwrap_or(0);
+            return Err(VvsError::NonFiniteDesired { index });
         }
         if observed == 0 {
             return Err(VvsError::EmptyDesired);
