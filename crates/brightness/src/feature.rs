@@ -316,11 +316,11 @@ impl Brightness {
         self.against_observed.clear();
         self.against_observed
             .extend(against.observed.iter().zip(valid).map(|(&a, &v)| a && v));
-        self.compared_gradient.clear();
+        // Both gradients are written at every pixel the picture observes, and read only
+        // there (elsewhere the rows are 0, below): no need to clear them.
         self.compared_gradient.resize(n, [0.0; 2]);
         // ∇(H R) and ∇H, inside the picture's observed pixels.
         self.observed_gradient.rebuild(&self.against_observed, w, h);
-        self.gradient.fill([0.0; 2]);
         self.observed_gradient
             .compute(&self.image, &self.against_observed, &mut self.gradient);
         self.observed_gradient.compute(

@@ -193,13 +193,16 @@ fn row_inline<const C: usize>(
 ) {
     let r = (kernel.len() - 1) / 2;
     let (a, b) = (a.min(width), b.min(width));
-    d.fill(0.0);
     if a >= b {
+        d.fill(0.0);
         return;
     }
     // pad[i] = s[i − r] inside the span, 0 elsewhere: out[x] = Σ_k K[k] pad[x + k].
     s.copy(a, b, &mut pad[a + r..b + r]);
     let (x0, x1) = (a.saturating_sub(r), (b + r).min(width));
+    // Zero beyond the radius of the span; every output between is written below.
+    d[..x0].fill(0.0);
+    d[x1..].fill(0.0);
     let mut x = x0;
     while x < x1 {
         let mut acc = [0.0f32; LANES];
@@ -209,8 +212,12 @@ fn row_inline<const C: usize>(
                 acc[j] += c * input[j];
             }
         }
-        let n = LANES.min(x1 - x);
-        d[x..x + n].copy_from_slice(&acc[..n]);
+        // A whole block as a copy of known size (a call to `memmove` otherwise).
+        if x + LANES <= x1 {
+            d[x..x + LANES].copy_from_slice(&acc);
+        } else {
+            d[x..x1].copy_from_slice(&acc[..x1 - x]);
+        }
         x += LANES;
     }
     pad[a + r..b + r].fill(0.0);
