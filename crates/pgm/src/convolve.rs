@@ -426,12 +426,11 @@ pub type Terms<'a> = &'a [(usize, &'a [f32])];
 
 /// Separable correlations at the samples only, row after row, with the bits of the
 /// whole-image passes: each of `planes` is [`rows`] of a channel of the image whose
-/// rows `src` gives (`(channel, row kernel)`, `spans` as for [`rows_interleaved`],
-/// each row asked for once, or twice at the edge of two bands) and output `o` at a
-/// sample is the
-/// sum of `outputs[o]`'s terms: [`columns_of`] of the first term's plane, then
-/// [`add_columns`]'s additions of the next ones, every tap in order. `dst[s][o]` is
-/// output `o` at `samples[s]`; `sample_rows` are [`SampleRow::of_samples`].
+/// rows `src` gives (`(channel, row kernel)`, `spans` as for [`rows_interleaved`];
+/// each row is asked for once, or twice at the edge of two bands), and output `o` at a
+/// sample is the sum of `outputs[o]`'s terms: [`columns_of`] of the first term's plane,
+/// then [`add_columns`]'s additions of the next ones, every tap in order. `dst[s][o]`
+/// is output `o` at `samples[s]`; `sample_rows` are [`SampleRow::of_samples`].
 ///
 /// The passes never leave the caches: the row passes of the rows an output row reads
 /// (its column kernels' radius around it) are kept in a ring of rows, each computed
@@ -442,9 +441,9 @@ pub type Terms<'a> = &'a [(usize, &'a [f32])];
 /// the result does not depend on the thread count.
 ///
 /// # Panics
-/// If a row of `src` is not `width` vectors, `dst` is shorter than the samples, a
-/// plane names a channel beyond `C`, a term a plane beyond `planes`, or a kernel has an
-/// even length.
+/// If a row of `src` is not `width` vectors, `dst` is shorter than the samples,
+/// `sample_rows` are not the samples' rows, a plane names a channel beyond `C`, a term
+/// a plane beyond `planes`, or a kernel has an even length.
 #[allow(clippy::too_many_arguments)]
 pub fn at_samples<const C: usize, const O: usize>(
     src: &impl RowSource<C>,
