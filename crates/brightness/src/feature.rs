@@ -38,6 +38,27 @@ impl Tables {
             .iter()
             .map(|&[start, end]| start as usize..end as usize)
     }
+
+    /// The photometric rows of valid run `i` into `out` (one per pixel of the run),
+    /// from an image's gradient and inverse ranges.
+    #[inline(always)]
+    fn run_rows(
+        &self,
+        i: usize,
+        gradient: &[[f32; 2]],
+        inverse_range: &[f32],
+        out: &mut [[f32; 6]],
+    ) {
+        let [start, stop] = self.valid_runs[i].map(|k| k as usize);
+        let f = self.run_factors[i] as usize;
+        photometric::rows(photometric::Run {
+            u: &self.factors_u[f..f + out.len()],
+            v: &self.factors_v[f..f + out.len()],
+            gradient: &gradient[start..stop],
+            inverse_range: &inverse_range[start..stop],
+            out,
+        });
+    }
 }
 
 /// The picture a rendering is compared with on their common support
@@ -503,17 +524,10 @@ impl Brightness {
     /// [`Brightness::inverse_range`], run by run.
     #[inline(always)]
     fn rows(&mut self) {
-        let mut first = 0;
-        for run in self.tables.runs() {
-            let n = run.len();
-            photometric::rows(photometric::Run {
-                u: &self.tables.factors_u[first..first + n],
-                v: &self.tables.factors_v[first..first + n],
-                gradient: &self.gradient[run.clone()],
-                inverse_range: &self.inverse_range[run.clone()],
-                out: &mut self.pixel_interaction[run],
-            });
-            first += n;
+        for (i, run) in self.tables.runs().enumerate() {
+            let out = &mut self.pixel_interaction[run];
+            self.tables
+                .run_rows(i, &self.gradient, &self.inverse_range, out);
         }
     }
 
@@ -534,14 +548,9 @@ impl Brightness {
         let [first, end] = self.tables.row_runs[y];
         for i in first as usize..end as usize {
             let [start, stop] = self.tables.valid_runs[i].map(|k| k as usize);
-            let (f, n) = (self.tables.run_factors[i] as usize, stop - start);
-            photometric::rows(photometric::Run {
-                u: &self.tables.factors_u[f..f + n],
-                v: &self.tables.factors_v[f..f + n],
-                gradient: &self.gradient[start..stop],
-                inverse_range: &self.inverse_range[start..stop],
-                out: &mut out[start - y * w..stop - y * w],
-            });
+            let out = &mut out[start - y * w..stop - y * w];
+            self.tables
+                .run_rows(i, &self.gradient, &self.inverse_range, out);
         }
     }
 

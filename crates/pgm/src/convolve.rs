@@ -1,21 +1,17 @@
-//! Separable correlation with zero padding, the workhorse of the transform.
+//! Separable correlation with zero padding, the workhorse of the transform's exact path
+//! (below λ = 3 by default).
 //!
 //! `out[x] = Σ_{k=−r..r} K[k + r] · in[x + k]`, the sum restricted to `0 ≤ x + k < n`
-//! (exact zero padding: pixels outside the image contribute nothing). Every output
-//! adds its taps in kernel order, so both passes give the textbook sums bit for bit
-//! (tested). Each pass keeps 32 neighbouring outputs of a row in registers over all
-//! its taps (the column pass, one tap at a time over whole rows before, was 7 % slower
-//! at 640×480 and 11 % at 320×240 on AVX2). Both vectorise, on the widest instruction
-//! set found at run time (the same bits on every one). Rows (and output rows of the
-//! column pass) are independent: with `parallel`, they are spread over rayon's
-//! threads, and the result does not depend on the thread count.
-//!
-//! The transform's exact path runs both passes at once, at its samples only
-//! ([`at_samples`]): the same bits, without writing and reading back whole images
-//! (a 640×480 `G`, `J_λ` and `L_G` at λ = 1 in 2.6 ms, not 3.2–4.2, on AVX2; no
-//! faster at 320×240, whose images stay in the second level of cache anyway).
-
-use rayon::prelude::*;
+//! (exact zero padding: pixels outside the image contribute nothing), along the rows,
+//! then along the columns of that, evaluated at the samples only ([`at_samples`]).
+//! Every output adds its taps in kernel order, so both passes give the textbook sums
+//! bit for bit (tested). Each pass keeps 32 neighbouring outputs of a row in registers
+//! over all its taps, and both vectorise, on the widest instruction set found at run
+//! time (the same bits on every one). The row passes an output row needs are kept in a
+//! ring of rows in cache, each output row gathered at its samples as soon as it is
+//! summed: whole-image passes, which wrote and read back whole images, took 3.2–4.2 ms
+//! for `G`, `J_λ` and `L_G` at 640×480, λ = 1 on AVX2, this 2.5–3.4 in the same sitting
+//! (no faster at 320×240, whose images stay in cache anyway).
 
 /// Sampled 1-D kernels of a Gaussian of extent `λ` over offsets `k = −r..=r`
 /// (`k = u − u_g`, pixel minus sample).
@@ -68,77 +64,6 @@ const LANES: usize = 32;
 /// 32 were alike on AVX2, 64 slower; 64 was better on AVX-512, 32 kept for both).
 const COLUMN_LANES: usize = 32;
 
-/// Correlate every row of a `width × height` image with `kernel` (radius
-/// `(kernel.len() − 1)/2`). `spans[y]` holds every non-zero input of row `y` (pass
-/// `[0, width]` if unknown): outputs farther than the radius from it are zero, and
-/// only those near it are computed (outside the omnidirectional mask, about 40 % of a
-/// row).
-///
-/// Each output sums its taps in kernel order, as the textbook loop does, so the result
-/// is the same bit for bit; taps that fall on zeros (outside the span or the image)
-/// add `±0`, which leaves a sum started at `+0` unchanged. `LANES` outputs are summed
-/// at a time in registers from a zero-padded copy of the row.
-pub fn rows(
-    src: &[f32],
-    dst: &mut [f32],
-    width: usize,
-    kernel: &[f32],
-    spans: &[Span],
-    parallel: bool,
-) {
-    // An image of one channel.
-    rows_interleaved::<1>(src.as_chunks().0, dst, width, kernel, spans, parallel);
-}
-
-/// [`rows`] of each channel of an image of `C`-vectors (`src`, `width × height`), each
-/// channel with the bits [`rows`] gives it alone, each row's channels computed while it
-/// is in the first level of cache (its vectors read once, not once a channel). `dst`
-/// holds the channels' output rows row after row: channel `c` of row `y` at `(y · C +
-/// c) · width` (the layout [`columns_of`] reads).
-pub fn rows_interleaved<const C: usize>(
-    src: &[[f32; C]],
-    dst: &mut [f32],
-    width: usize,
-    kernel: &[f32],
-    spans: &[Span],
-    parallel: bool,
-) {
-    let pad_len = width + kernel.len() + LANES;
-    // Each thread keeps its padded row between calls: no allocation per image.
-    let one = |(s, d): (&[[f32; C]], &mut [f32]), span: Span| {
-        PAD.with_borrow_mut(|pad| {
-            if pad.len() < pad_len {
-                pad.resize(pad_len, 0.0);
-            }
-            for (c, d) in d.chunks_exact_mut(width).enumerate() {
-                crate::simd::on_widest(RowOp {
-                    s: Channel(s, c),
-                    d,
-                    width,
-                    kernel,
-                    span,
-                    pad,
-                });
-            }
-        });
-    };
-    if parallel {
-        src.par_chunks_exact(width)
-            .zip(dst.par_chunks_exact_mut(C * width))
-            .zip(spans)
-            .with_min_len(16)
-            .for_each(|(row, &span)| one(row, span));
-    } else {
-        for (row, &span) in src
-            .chunks_exact(width)
-            .zip(dst.chunks_exact_mut(C * width))
-            .zip(spans)
-        {
-            one(row, span);
-        }
-    }
-}
-
 /// Channel `.1` of a row of vectors, as [`row_inline`] reads it.
 #[derive(Clone, Copy)]
 struct Channel<'a, const C: usize>(&'a [[f32; C]], usize);
@@ -157,31 +82,13 @@ impl<const C: usize> Channel<'_, C> {
     }
 }
 
-thread_local! {
-    /// The zero-padded row of [`rows`], per thread (zero outside the copy it holds
-    /// during one row).
-    static PAD: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
-}
-
-/// One row of a channel of [`rows_interleaved`], a [`crate::simd::Kernel`]; `pad`
-/// holds at least `width + kernel.len() + LANES` values and is zero outside the span's
-/// copy (restored before returning).
-struct RowOp<'a, const C: usize> {
-    s: Channel<'a, C>,
-    d: &'a mut [f32],
-    width: usize,
-    kernel: &'a [f32],
-    span: Span,
-    pad: &'a mut [f32],
-}
-
-impl<const C: usize> crate::simd::Kernel for RowOp<'_, C> {
-    #[inline(always)]
-    fn run<S: pulp::Simd>(self, _: S) {
-        row_inline(self.s, self.d, self.width, self.kernel, self.span, self.pad);
-    }
-}
-
+/// One row pass: channel `s` of a row correlated with `kernel` into `d` (`width`
+/// outputs; those farther than the radius from the span `[a, b)` that holds the row's
+/// non-zero inputs are zero, the others computed, `LANES` at a time in registers from
+/// a zero-padded copy of the row). `pad` holds at least `width + kernel.len() + LANES`
+/// values and is zero outside the span's copy (restored before returning). Taps that
+/// fall on zeros add `±0`, which leaves a sum started at `+0` unchanged: the textbook
+/// sum's bits.
 #[inline(always)]
 fn row_inline<const C: usize>(
     s: Channel<'_, C>,
@@ -221,149 +128,6 @@ fn row_inline<const C: usize>(
         x += LANES;
     }
     pad[a + r..b + r].fill(0.0);
-}
-
-/// Correlate the columns of a `width × height` image with `kernel`, writing only the
-/// spans `out` (row, columns) of `dst` (the rest is left untouched).
-pub fn columns(
-    src: &[f32],
-    dst: &mut [f32],
-    width: usize,
-    height: usize,
-    kernel: &[f32],
-    out: &[(usize, Span)],
-    parallel: bool,
-) {
-    columns_of(src, [0, width], dst, width, height, kernel, out, parallel);
-}
-
-/// Add the column correlation of `src` with `kernel` to the spans `out` (row, columns;
-/// rows increasing, at most one span per row) of `dst`.
-pub fn add_columns(
-    src: &[f32],
-    dst: &mut [f32],
-    width: usize,
-    height: usize,
-    kernel: &[f32],
-    out: &[(usize, Span)],
-    parallel: bool,
-) {
-    add_columns_of(src, [0, width], dst, width, height, kernel, out, parallel);
-}
-
-/// [`columns`] of the image whose row `y` starts at `offset + y · stride` in `src`
-/// (`[offset, stride]`): a channel of [`rows_interleaved`]'s output, `[c · width, C ·
-/// width]`.
-#[allow(clippy::too_many_arguments)]
-pub fn columns_of(
-    src: &[f32],
-    layout: [usize; 2],
-    dst: &mut [f32],
-    width: usize,
-    height: usize,
-    kernel: &[f32],
-    out: &[(usize, Span)],
-    parallel: bool,
-) {
-    for &(y, [a, b]) in out {
-        dst[y * width + a..y * width + b].fill(0.0);
-    }
-    add_columns_of(src, layout, dst, width, height, kernel, out, parallel);
-}
-
-/// [`add_columns`] of the image whose row `y` starts at `offset + y · stride` in `src`.
-#[allow(clippy::too_many_arguments)]
-fn add_columns_of(
-    src: &[f32],
-    [offset, stride]: [usize; 2],
-    dst: &mut [f32],
-    width: usize,
-    height: usize,
-    kernel: &[f32],
-    out: &[(usize, Span)],
-    parallel: bool,
-) {
-    let one = |y: usize, span: Span, d: &mut [f32]| {
-        crate::simd::on_widest(ColumnOp {
-            src,
-            offset,
-            stride,
-            d,
-            y,
-            span,
-            height,
-            kernel,
-        })
-    };
-    if parallel {
-        dst.par_chunks_exact_mut(width)
-            .enumerate()
-            .with_min_len(16)
-            .for_each(|(y, d)| {
-                if let Ok(i) = out.binary_search_by_key(&y, |&(row, _)| row) {
-                    one(y, out[i].1, d);
-                }
-            });
-    } else {
-        for &(y, span) in out {
-            one(y, span, &mut dst[y * width..(y + 1) * width]);
-        }
-    }
-}
-
-/// One output row of [`add_columns`], a [`crate::simd::Kernel`].
-struct ColumnOp<'a> {
-    src: &'a [f32],
-    /// Where the input's row `y` starts: `offset + y · stride`.
-    offset: usize,
-    stride: usize,
-    d: &'a mut [f32],
-    y: usize,
-    span: Span,
-    height: usize,
-    kernel: &'a [f32],
-}
-
-impl crate::simd::Kernel for ColumnOp<'_> {
-    #[inline(always)]
-    fn run<S: pulp::Simd>(self, _: S) {
-        let Self {
-            src,
-            offset,
-            stride,
-            d,
-            y,
-            span: [a, b],
-            height,
-            kernel,
-        } = self;
-        let r = (kernel.len() - 1) / 2;
-        let k0 = r.saturating_sub(y);
-        let k1 = (kernel.len()).min(height + r - y);
-        // `COLUMN_LANES` outputs at a time in registers, loaded once and stored once,
-        // every tap added in order; the last outputs one tap at a time.
-        let mut x = a;
-        while x + COLUMN_LANES <= b {
-            let mut acc: [f32; COLUMN_LANES] = d[x..x + COLUMN_LANES].try_into().unwrap();
-            for ki in k0..k1 {
-                let c = kernel[ki];
-                let row = offset + (y + ki - r) * stride + x;
-                let input: &[f32; COLUMN_LANES] = src[row..row + COLUMN_LANES].try_into().unwrap();
-                for j in 0..COLUMN_LANES {
-                    acc[j] += c * input[j];
-                }
-            }
-            d[x..x + COLUMN_LANES].copy_from_slice(&acc);
-            x += COLUMN_LANES;
-        }
-        for ki in k0..k1 {
-            let c = kernel[ki];
-            let row = offset + (y + ki - r) * stride;
-            for (o, &i) in d[x..b].iter_mut().zip(&src[row + x..row + b]) {
-                *o += c * i;
-            }
-        }
-    }
 }
 
 /// A row of samples for [`at_samples`]: image row `y`, the columns `span` its samples
@@ -424,19 +188,21 @@ impl<const C: usize> RowSource<C> for ImageRows<'_, C> {
 /// pass's index in `planes` and the column kernel applied to it, added in order.
 pub type Terms<'a> = &'a [(usize, &'a [f32])];
 
-/// Separable correlations at the samples only, row after row, with the bits of the
-/// whole-image passes: each of `planes` is [`rows`] of a channel of the image whose
-/// rows `src` gives (`(channel, row kernel)`, `spans` as for [`rows_interleaved`];
+/// Separable correlations at the samples only, row after row: each of `planes` is a
+/// channel of the image whose rows `src` gives, correlated along its rows with a
+/// kernel (`(channel, row kernel)`; `spans[y]` holds every non-zero input of row `y`,
+/// `[0, width]` if unknown, and only outputs within the radius of it are computed;
 /// each row is asked for once, or twice at the edge of two bands), and output `o` at a
-/// sample is the sum of `outputs[o]`'s terms: [`columns_of`] of the first term's plane,
-/// then [`add_columns`]'s additions of the next ones, every tap in order. `dst[s][o]`
-/// is output `o` at `samples[s]`; `sample_rows` are [`SampleRow::of_samples`].
+/// sample is the sum of `outputs[o]`'s terms, each a plane correlated along its columns
+/// with a kernel, every term's taps added in order from `+0`: the textbook sums' bits.
+/// `dst[s][o]` is output `o` at `samples[s]`; `sample_rows` are
+/// [`SampleRow::of_samples`].
 ///
 /// The passes never leave the caches: the row passes of the rows an output row reads
 /// (its column kernels' radius around it) are kept in a ring of rows, each computed
-/// once, and each output row is gathered at its samples as soon as it is summed, where
-/// the whole-image passes wrote, read back and wrote again several full images (about
-/// 45 MB for `L_G` at 640×480). With `parallel`, bands of output rows are spread over
+/// once, and each output row is gathered at its samples as soon as it is summed (whole
+/// images written and read back instead moved about 45 MB for `L_G` at 640×480). With
+/// `parallel`, bands of output rows are spread over
 /// rayon's threads, each with its own ring (its first rows' row passes computed twice);
 /// the result does not depend on the thread count.
 ///
@@ -655,7 +421,7 @@ impl<R: RowSource<C>, const C: usize, const O: usize> crate::simd::Kernel for Ba
 
 /// Output row `y` (of `h`) of a sum of column correlations over the columns `[a, b)`
 /// of `line`, from the row passes kept in `ring` (row `y + i − radius` of plane `p` at
-/// `p · plane_len + starts[i]`): [`ColumnOp`]'s sums, `COLUMN_LANES` outputs at a time
+/// `p · plane_len + starts[i]`): `COLUMN_LANES` outputs at a time
 /// in registers over every term's taps in order, the last outputs one tap at a time.
 #[inline(always)]
 fn column_sums(
