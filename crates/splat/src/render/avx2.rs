@@ -12,7 +12,7 @@ use core::arch::x86_64::{__m256, __m256i};
 use pulp::x86::V3;
 
 use super::avx512::{GE, NLT, four};
-use super::lanes::{Constants, Vectors, splat_words, unpack};
+use super::lanes::{Constants, Pair, Vectors, splat_words, unpack};
 use super::splat::Splat;
 use super::view::View;
 use crate::PackedPoint;
@@ -184,8 +184,10 @@ impl Ops {
     }
 }
 
-/// The splats of [`super::project::project_block`], eight points at a time (the lengths
-/// are equal multiples of eight).
+/// The splats of [`super::project::project_block`], sixteen points at a time as two
+/// registers side by side ([`Pair`]: two independent chains of the projection's
+/// dependent operations, which one register's alone leaves the processor waiting on),
+/// then eight at a time (the lengths are equal multiples of eight).
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V3,
@@ -195,9 +197,28 @@ pub(super) fn project_splats(
     out: &mut [Splat],
 ) {
     let o = Ops(simd);
+    let pair = Pair(o);
+    let constants = Constants::new(pair, view, footprint);
+    let (points, rest) = points.as_chunks::<16>();
+    let (out, out_rest) = out.as_chunks_mut::<16>();
+    for (points, out) in points.iter().zip(out) {
+        // Points 0–7 in the first register of each pair, 8–15 in the second, each
+        // taken apart as below.
+        let [a, b, c, d]: [__m256i; 4] = pulp::cast(*points);
+        let ([xy0, zi0], [xy1, zi1]) = (o.words_of_points(a, b), o.words_of_points(c, d));
+        let (steps, intensity) = unpack(pair, &constants, [xy0, xy1], [zi0, zi1]);
+        let [w0, w1, w2, w3] = splat_words(pair, &constants, steps, intensity);
+        let (out_first, out_second) = out.split_at_mut(8);
+        for (h, out) in [(0, out_first), (1, out_second)] {
+            let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves([w0[h], w1[h], w2[h], w3[h]]));
+            for (out, word) in out.iter_mut().zip(&words) {
+                *out = Splat(*word);
+            }
+        }
+    }
     let constants = Constants::new(o, view, footprint);
-    let (points, _) = points.as_chunks::<8>();
-    let (out, _) = out.as_chunks_mut::<8>();
+    let (points, _) = rest.as_chunks::<8>();
+    let (out, _) = out_rest.as_chunks_mut::<8>();
     for (points, out) in points.iter().zip(out) {
         // Eight points of 8 bytes, their words taken apart: points 0, 2, 4, 6 |
         // 1, 3, 5, 7.

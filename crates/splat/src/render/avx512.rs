@@ -11,7 +11,7 @@ use core::arch::x86_64::{__m512, __m512i, __mmask16};
 
 use pulp::x86::V4;
 
-use super::lanes::{Constants, Vectors, splat_words, unpack};
+use super::lanes::{Constants, Pair, Vectors, splat_words, unpack};
 use super::splat::Splat;
 use super::view::View;
 use crate::PackedPoint;
@@ -157,10 +157,30 @@ impl Ops {
         let idx = pulp::cast(idx);
         self.0.avx512f._mm512_permutex2var_epi32(a, idx, b)
     }
+
+    /// One register per word of sixteen splats, transposed to four words per point.
+    #[inline(always)]
+    fn splats_of_words(self, [w0, w1, w2, w3]: [__m512i; 4]) -> [__m512i; 4] {
+        let (w01_lo, w01_hi) = (
+            self.permute_i(w0, PAIRS_LOW, w1),
+            self.permute_i(w0, PAIRS_HIGH, w1),
+        );
+        let (w23_lo, w23_hi) = (
+            self.permute_i(w2, PAIRS_LOW, w3),
+            self.permute_i(w2, PAIRS_HIGH, w3),
+        );
+        [
+            self.permute_i(w01_lo, QUADS_LOW, w23_lo),
+            self.permute_i(w01_lo, QUADS_HIGH, w23_lo),
+            self.permute_i(w01_hi, QUADS_LOW, w23_hi),
+            self.permute_i(w01_hi, QUADS_HIGH, w23_hi),
+        ]
+    }
 }
 
-/// The splats of [`super::project::project_block`], sixteen points at a time (the
-/// lengths are equal multiples of sixteen).
+/// The splats of [`super::project::project_block`], thirty-two points at a time as two
+/// registers side by side ([`Pair`]), then sixteen at a time (the lengths are equal
+/// multiples of sixteen).
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V4,
@@ -170,9 +190,27 @@ pub(super) fn project_splats(
     out: &mut [Splat],
 ) {
     let o = Ops(simd);
+    let pair = Pair(o);
+    let constants = Constants::new(pair, view, footprint);
+    let (points, rest) = points.as_chunks::<32>();
+    let (out, out_rest) = out.as_chunks_mut::<32>();
+    for (points, out) in points.iter().zip(out) {
+        // Points 0–15 in the first register of each pair, 16–31 in the second.
+        let [a, b, c, d]: [__m512i; 4] = pulp::cast(*points);
+        let xy = [o.permute_i(a, EVENS, b), o.permute_i(c, EVENS, d)];
+        let zi = [o.permute_i(a, ODDS, b), o.permute_i(c, ODDS, d)];
+        let (steps, intensity) = unpack(pair, &constants, xy, zi);
+        let words = splat_words(pair, &constants, steps, intensity);
+        for (h, out) in out.as_chunks_mut::<16>().0.iter_mut().enumerate() {
+            let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words(words.map(|w| w[h])));
+            for (out, word) in out.iter_mut().zip(&words) {
+                *out = Splat(*word);
+            }
+        }
+    }
     let constants = Constants::new(o, view, footprint);
-    let (points, _) = points.as_chunks::<16>();
-    let (out, _) = out.as_chunks_mut::<16>();
+    let (points, _) = rest.as_chunks::<16>();
+    let (out, _) = out_rest.as_chunks_mut::<16>();
     for (points, out) in points.iter().zip(out) {
         // Sixteen points of two 32-bit words each, their first and second words
         // gathered by two two-source permutes.
@@ -180,22 +218,8 @@ pub(super) fn project_splats(
         let (xy, zi) = (o.permute_i(a, EVENS, b), o.permute_i(a, ODDS, b));
         let (steps, intensity) = unpack(o, &constants, xy, zi);
         // One register per word of the splats, transposed to four words per point.
-        let [w0, w1, w2, w3] = splat_words(o, &constants, steps, intensity);
-        let (w01_lo, w01_hi) = (
-            o.permute_i(w0, PAIRS_LOW, w1),
-            o.permute_i(w0, PAIRS_HIGH, w1),
-        );
-        let (w23_lo, w23_hi) = (
-            o.permute_i(w2, PAIRS_LOW, w3),
-            o.permute_i(w2, PAIRS_HIGH, w3),
-        );
-        let quads = [
-            o.permute_i(w01_lo, QUADS_LOW, w23_lo),
-            o.permute_i(w01_lo, QUADS_HIGH, w23_lo),
-            o.permute_i(w01_hi, QUADS_LOW, w23_hi),
-            o.permute_i(w01_hi, QUADS_HIGH, w23_hi),
-        ];
-        let words: [[u32; 4]; 16] = pulp::cast(quads);
+        let words = splat_words(o, &constants, steps, intensity);
+        let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words(words));
         for (out, word) in out.iter_mut().zip(&words) {
             *out = Splat(*word);
         }

@@ -260,3 +260,144 @@ pub(super) fn splat_words<V: Vectors>(
         o.bits(o.div(rho, c.band_factor)),
     ]
 }
+
+/// Two registers of `V` as one: every operation on both, the first's before the
+/// second's. The projection's arithmetic is a chain of dependent operations (a square
+/// root, two divisions) longer than a processor's window of instructions can overlap
+/// from one block of points to the next; two independent chains side by side keep its
+/// units busy. The same operations on every lane, hence the same bits.
+#[derive(Clone, Copy)]
+pub(super) struct Pair<V>(pub(super) V);
+
+/// `f` on both halves.
+#[inline(always)]
+fn both<T: Copy, U>(a: [T; 2], mut f: impl FnMut(T) -> U) -> [U; 2] {
+    let first = f(a[0]);
+    [first, f(a[1])]
+}
+
+/// `f` on both halves of two operands.
+#[inline(always)]
+fn both2<T: Copy, S: Copy, U>(a: [T; 2], b: [S; 2], mut f: impl FnMut(T, S) -> U) -> [U; 2] {
+    let first = f(a[0], b[0]);
+    [first, f(a[1], b[1])]
+}
+
+impl<V: Vectors> Vectors for Pair<V> {
+    type F = [V::F; 2];
+    type I = [V::I; 2];
+    type M = [V::M; 2];
+
+    #[inline(always)]
+    fn splat(self, x: f32) -> Self::F {
+        let v = self.0.splat(x);
+        [v, v]
+    }
+    #[inline(always)]
+    fn splat_i(self, x: i32) -> Self::I {
+        let v = self.0.splat_i(x);
+        [v, v]
+    }
+    #[inline(always)]
+    fn mask_if(self, set: bool) -> Self::M {
+        let m = self.0.mask_if(set);
+        [m, m]
+    }
+    #[inline(always)]
+    fn add(self, a: Self::F, b: Self::F) -> Self::F {
+        both2(a, b, |a, b| self.0.add(a, b))
+    }
+    #[inline(always)]
+    fn sub(self, a: Self::F, b: Self::F) -> Self::F {
+        both2(a, b, |a, b| self.0.sub(a, b))
+    }
+    #[inline(always)]
+    fn mul(self, a: Self::F, b: Self::F) -> Self::F {
+        both2(a, b, |a, b| self.0.mul(a, b))
+    }
+    #[inline(always)]
+    fn div(self, a: Self::F, b: Self::F) -> Self::F {
+        both2(a, b, |a, b| self.0.div(a, b))
+    }
+    #[inline(always)]
+    fn sqrt(self, a: Self::F) -> Self::F {
+        both(a, |a| self.0.sqrt(a))
+    }
+    #[inline(always)]
+    fn max(self, a: Self::F, b: Self::F) -> Self::F {
+        both2(a, b, |a, b| self.0.max(a, b))
+    }
+    #[inline(always)]
+    fn min(self, a: Self::F, b: Self::F) -> Self::F {
+        both2(a, b, |a, b| self.0.min(a, b))
+    }
+    #[inline(always)]
+    fn gt(self, a: Self::F, b: Self::F) -> Self::M {
+        both2(a, b, |a, b| self.0.gt(a, b))
+    }
+    #[inline(always)]
+    fn lt(self, a: Self::F, b: Self::F) -> Self::M {
+        both2(a, b, |a, b| self.0.lt(a, b))
+    }
+    #[inline(always)]
+    fn gt_i(self, a: Self::I, b: Self::I) -> Self::M {
+        both2(a, b, |a, b| self.0.gt_i(a, b))
+    }
+    #[inline(always)]
+    fn and_m(self, a: Self::M, b: Self::M) -> Self::M {
+        both2(a, b, |a, b| self.0.and_m(a, b))
+    }
+    #[inline(always)]
+    fn or_m(self, a: Self::M, b: Self::M) -> Self::M {
+        both2(a, b, |a, b| self.0.or_m(a, b))
+    }
+    #[inline(always)]
+    fn add_i(self, a: Self::I, b: Self::I) -> Self::I {
+        both2(a, b, |a, b| self.0.add_i(a, b))
+    }
+    #[inline(always)]
+    fn sub_i(self, a: Self::I, b: Self::I) -> Self::I {
+        both2(a, b, |a, b| self.0.sub_i(a, b))
+    }
+    #[inline(always)]
+    fn and_i(self, a: Self::I, b: Self::I) -> Self::I {
+        both2(a, b, |a, b| self.0.and_i(a, b))
+    }
+    #[inline(always)]
+    fn or_i(self, a: Self::I, b: Self::I) -> Self::I {
+        both2(a, b, |a, b| self.0.or_i(a, b))
+    }
+    #[inline(always)]
+    fn shl16(self, a: Self::I) -> Self::I {
+        both(a, |a| self.0.shl16(a))
+    }
+    #[inline(always)]
+    fn shr16(self, a: Self::I) -> Self::I {
+        both(a, |a| self.0.shr16(a))
+    }
+    #[inline(always)]
+    fn mul_u16(self, a: Self::I, b: Self::I) -> Self::I {
+        both2(a, b, |a, b| self.0.mul_u16(a, b))
+    }
+    #[inline(always)]
+    fn bits(self, a: Self::F) -> Self::I {
+        both(a, |a| self.0.bits(a))
+    }
+    #[inline(always)]
+    fn to_f32(self, a: Self::I) -> Self::F {
+        both(a, |a| self.0.to_f32(a))
+    }
+    #[inline(always)]
+    fn minus_one_where(self, mask: Self::M, a: Self::I) -> Self::I {
+        both2(mask, a, |m, a| self.0.minus_one_where(m, a))
+    }
+    #[inline(always)]
+    fn plus_one_where(self, mask: Self::M, a: Self::I) -> Self::I {
+        both2(mask, a, |m, a| self.0.plus_one_where(m, a))
+    }
+    #[inline(always)]
+    fn select(self, mask: Self::M, a: Self::I, b: Self::I) -> Self::I {
+        let first = self.0.select(mask[0], a[0], b[0]);
+        [first, self.0.select(mask[1], a[1], b[1])]
+    }
+}
