@@ -171,15 +171,45 @@ fn project_and_depth(
             }
             // Keep the splats that may add a sample (`kept` never passes the number of
             // points read, so its slot exists).
-            for s in out.iter().filter(|s| s.drawn()) {
-                let visible = splat_depth(depth, s, view, projector);
-                splats[kept] = *s;
-                kept += usize::from(visible);
-            }
+            kept = projector.apart(KeepVisible {
+                stage: out,
+                depth,
+                view,
+                splats,
+                kept,
+                projector,
+            });
         }
     }
     warm.finish();
     kept
+}
+
+/// The depth pass of a stage of splats: each drawn splat's minima
+/// ([`splat_depth`]), kept in `splats` from slot `kept` on if it may add a sample.
+/// Returns the new number kept.
+struct KeepVisible<'a, P> {
+    stage: &'a [Splat],
+    depth: &'a mut [u32],
+    view: &'a View,
+    splats: &'a mut [Splat],
+    kept: usize,
+    projector: P,
+}
+
+impl<P: Project> pulp::WithSimd for KeepVisible<'_, P> {
+    type Output = usize;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> usize {
+        let mut kept = self.kept;
+        for s in self.stage.iter().filter(|s| s.drawn()) {
+            let visible = splat_depth(self.depth, s, self.view, self.projector);
+            self.splats[kept] = *s;
+            kept += usize::from(visible);
+        }
+        kept
+    }
 }
 
 /// Asks for the cache lines of the points to draw a steady [`WARM_AHEAD`] points

@@ -29,6 +29,11 @@ pub(super) trait Project: Copy {
     /// ones), as many as `out`.
     fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]);
 
+    /// `kernel` as a function of its own, compiled for this instruction set: its
+    /// registers allocated apart from its caller's (a loop inlined into the projection's
+    /// kept its counters on the stack).
+    fn apart<K: pulp::WithSimd>(self, kernel: K) -> K::Output;
+
     /// Pass 1 of a 3 × 3 splat on plain keys (`pass_one::splat_depth`); the plain loop
     /// unless the instruction set does it whole rows at a time.
     #[inline(always)]
@@ -118,6 +123,16 @@ impl Project for Baseline {
     fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<TAIL>(self, points, footprint, view, out);
     }
+
+    fn apart<K: pulp::WithSimd>(self, kernel: K) -> K::Output {
+        apart_scalar(kernel)
+    }
+}
+
+/// [`Project::apart`] on the baseline.
+#[inline(never)]
+fn apart_scalar<K: pulp::WithSimd>(kernel: K) -> K::Output {
+    kernel.with_simd(pulp::Scalar::new())
 }
 
 /// Sixteen points per instruction where the processor has AVX-512
@@ -143,6 +158,10 @@ impl Project for Avx512 {
     #[inline(always)]
     fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<16>(self, points, footprint, view, out);
+    }
+
+    fn apart<K: pulp::WithSimd>(self, kernel: K) -> K::Output {
+        pulp::Simd::vectorize(self.0, kernel)
     }
 
     #[inline(always)]
@@ -204,6 +223,10 @@ impl Project for Avx2 {
     #[inline(always)]
     fn rest(self, points: &[PackedPoint], footprint: f32, view: &View, out: &mut [Splat]) {
         by_blocks::<8>(self, points, footprint, view, out);
+    }
+
+    fn apart<K: pulp::WithSimd>(self, kernel: K) -> K::Output {
+        pulp::Simd::vectorize(self.0, kernel)
     }
 
     #[inline(always)]
