@@ -53,8 +53,9 @@
 //! (a cell's last points by smaller padded blocks, 256 at most into a buffer that stays
 //! in the first level of cache): on AVX-512 or AVX2 where the processor has them (found
 //! at run time, sixteen or eight points per instruction, through `pulp`; two registers
-//! of points side by side, so that the projection's chain of dependent operations, a
-//! square root and two divisions long, runs twice at once), else in
+//! of points side by side, in two phases, so that the processor overlaps more of the
+//! projection's chains of dependent operations, a square root and two divisions long),
+//! else in
 //! explicit SSE2 on x86-64 (through `safe_arch`, four points per instruction), each
 //! splat written whole as four 32-bit words (a single-pixel splat's first word is its
 //! pixel's index, so that neither pass unpacks a column and a row); elsewhere with

@@ -12,7 +12,7 @@ use core::arch::x86_64::{__m256, __m256i};
 use pulp::x86::V3;
 
 use super::avx512::{GE, NLT, four};
-use super::lanes::{Constants, Pair, Vectors, splat_words, unpack};
+use super::lanes::{Constants, Pair, Rays, Vectors, rays, splat_words, unpack, words_of_rays};
 use super::splat::Splat;
 use super::view::View;
 use crate::PackedPoint;
@@ -184,10 +184,13 @@ impl Ops {
     }
 }
 
-/// The splats of [`super::project::project_block`], sixteen points at a time as two
-/// registers side by side ([`Pair`]: two independent chains of the projection's
-/// dependent operations, which one register's alone leaves the processor waiting on),
-/// then eight at a time (the lengths are equal multiples of eight).
+/// The splats of [`super::project::project_block`]: blocks of 64 points as four pairs
+/// of registers ([`Pair`]), in two phases (the four pairs' [`Rays`], then their
+/// splats), then eight points at a time (the lengths are equal multiples of eight).
+/// The projection is a long chain of dependent operations (a square root, two
+/// divisions) that one register at a time leaves the processor waiting on: pairs run
+/// two chains side by side, and each phase's chain is half as long, so that more of
+/// them overlap.
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V3,
@@ -199,21 +202,19 @@ pub(super) fn project_splats(
     let o = Ops(simd);
     let pair = Pair(o);
     let constants = Constants::new(pair, view, footprint);
-    let (points, rest) = points.as_chunks::<16>();
-    let (out, out_rest) = out.as_chunks_mut::<16>();
+    let (points, rest) = points.as_chunks::<64>();
+    let (out, out_rest) = out.as_chunks_mut::<64>();
     for (points, out) in points.iter().zip(out) {
-        // Points 0–7 in the first register of each pair, 8–15 in the second, each
-        // taken apart as below.
-        let [a, b, c, d]: [__m256i; 4] = pulp::cast(*points);
-        let ([xy0, zi0], [xy1, zi1]) = (o.words_of_points(a, b), o.words_of_points(c, d));
-        let (steps, intensity) = unpack(pair, &constants, [xy0, xy1], [zi0, zi1]);
-        let [w0, w1, w2, w3] = splat_words(pair, &constants, steps, intensity);
-        let (out_first, out_second) = out.split_at_mut(8);
-        for (h, out) in [(0, out_first), (1, out_second)] {
-            let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves([w0[h], w1[h], w2[h], w3[h]]));
-            for (out, word) in out.iter_mut().zip(&words) {
-                *out = Splat(*word);
-            }
+        let points = points.as_chunks::<16>().0;
+        // Not `array::from_fn`: its closure would be compiled without AVX2.
+        let r: [Rays<Pair<Ops>>; 4] = [
+            pair_rays(o, &constants, &points[0]),
+            pair_rays(o, &constants, &points[1]),
+            pair_rays(o, &constants, &points[2]),
+            pair_rays(o, &constants, &points[3]),
+        ];
+        for (r, out) in r.into_iter().zip(out.as_chunks_mut::<16>().0) {
+            store_pair(o, &constants, r, out);
         }
     }
     let constants = Constants::new(o, view, footprint);
@@ -229,6 +230,33 @@ pub(super) fn project_splats(
         // point: points 0 | 1, 2 | 3, 4 | 5, 6 | 7.
         let words = splat_words(o, &constants, steps, intensity);
         let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves(words));
+        for (out, word) in out.iter_mut().zip(&words) {
+            *out = Splat(*word);
+        }
+    }
+}
+
+/// [`Rays`] of sixteen points: points 0–7 in the first register of each pair, 8–15
+/// in the second, each taken apart as in [`project_splats`].
+#[inline(always)]
+fn pair_rays(
+    o: Ops,
+    constants: &Constants<Pair<Ops>>,
+    points: &[PackedPoint; 16],
+) -> Rays<Pair<Ops>> {
+    let [a, b, c, d]: [__m256i; 4] = pulp::cast(*points);
+    let ([xy0, zi0], [xy1, zi1]) = (o.words_of_points(a, b), o.words_of_points(c, d));
+    let (steps, intensity) = unpack(Pair(o), constants, [xy0, xy1], [zi0, zi1]);
+    rays(Pair(o), constants, steps, intensity)
+}
+
+/// The splats of sixteen points from their [`Rays`].
+#[inline(always)]
+fn store_pair(o: Ops, constants: &Constants<Pair<Ops>>, r: Rays<Pair<Ops>>, out: &mut [Splat; 16]) {
+    let [w0, w1, w2, w3] = words_of_rays(Pair(o), constants, r);
+    let (out_first, out_second) = out.split_at_mut(8);
+    for (h, out) in [(0, out_first), (1, out_second)] {
+        let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves([w0[h], w1[h], w2[h], w3[h]]));
         for (out, word) in out.iter_mut().zip(&words) {
             *out = Splat(*word);
         }

@@ -11,7 +11,7 @@ use core::arch::x86_64::{__m512, __m512i, __mmask16};
 
 use pulp::x86::V4;
 
-use super::lanes::{Constants, Pair, Vectors, splat_words, unpack};
+use super::lanes::{Constants, Pair, Rays, Vectors, rays, splat_words, unpack, words_of_rays};
 use super::splat::Splat;
 use super::view::View;
 use crate::PackedPoint;
@@ -178,9 +178,9 @@ impl Ops {
     }
 }
 
-/// The splats of [`super::project::project_block`], thirty-two points at a time as two
-/// registers side by side ([`Pair`]), then sixteen at a time (the lengths are equal
-/// multiples of sixteen).
+/// The splats of [`super::project::project_block`]: blocks of 64 points as two pairs
+/// of registers ([`Pair`]) in two phases, as [`super::avx2::project_splats`], then
+/// sixteen points at a time (the lengths are equal multiples of sixteen).
 #[inline(always)]
 pub(super) fn project_splats(
     simd: V4,
@@ -192,20 +192,16 @@ pub(super) fn project_splats(
     let o = Ops(simd);
     let pair = Pair(o);
     let constants = Constants::new(pair, view, footprint);
-    let (points, rest) = points.as_chunks::<32>();
-    let (out, out_rest) = out.as_chunks_mut::<32>();
+    let (points, rest) = points.as_chunks::<64>();
+    let (out, out_rest) = out.as_chunks_mut::<64>();
     for (points, out) in points.iter().zip(out) {
-        // Points 0–15 in the first register of each pair, 16–31 in the second.
-        let [a, b, c, d]: [__m512i; 4] = pulp::cast(*points);
-        let xy = [o.permute_i(a, EVENS, b), o.permute_i(c, EVENS, d)];
-        let zi = [o.permute_i(a, ODDS, b), o.permute_i(c, ODDS, d)];
-        let (steps, intensity) = unpack(pair, &constants, xy, zi);
-        let words = splat_words(pair, &constants, steps, intensity);
-        for (h, out) in out.as_chunks_mut::<16>().0.iter_mut().enumerate() {
-            let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words(words.map(|w| w[h])));
-            for (out, word) in out.iter_mut().zip(&words) {
-                *out = Splat(*word);
-            }
+        let (points, out) = (points.as_chunks::<32>().0, out.as_chunks_mut::<32>().0);
+        let r = [
+            pair_rays(o, &constants, &points[0]),
+            pair_rays(o, &constants, &points[1]),
+        ];
+        for (r, out) in r.into_iter().zip(out) {
+            store_pair(o, &constants, r, out);
         }
     }
     let constants = Constants::new(o, view, footprint);
@@ -220,6 +216,34 @@ pub(super) fn project_splats(
         // One register per word of the splats, transposed to four words per point.
         let words = splat_words(o, &constants, steps, intensity);
         let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words(words));
+        for (out, word) in out.iter_mut().zip(&words) {
+            *out = Splat(*word);
+        }
+    }
+}
+
+/// [`Rays`] of thirty-two points: points 0–15 in the first register of each pair,
+/// 16–31 in the second, each taken apart as in [`project_splats`].
+#[inline(always)]
+fn pair_rays(
+    o: Ops,
+    constants: &Constants<Pair<Ops>>,
+    points: &[PackedPoint; 32],
+) -> Rays<Pair<Ops>> {
+    let [a, b, c, d]: [__m512i; 4] = pulp::cast(*points);
+    let xy = [o.permute_i(a, EVENS, b), o.permute_i(c, EVENS, d)];
+    let zi = [o.permute_i(a, ODDS, b), o.permute_i(c, ODDS, d)];
+    let (steps, intensity) = unpack(Pair(o), constants, xy, zi);
+    rays(Pair(o), constants, steps, intensity)
+}
+
+/// The splats of thirty-two points from their [`Rays`].
+#[inline(always)]
+fn store_pair(o: Ops, constants: &Constants<Pair<Ops>>, r: Rays<Pair<Ops>>, out: &mut [Splat; 32]) {
+    let [w0, w1, w2, w3] = words_of_rays(Pair(o), constants, r);
+    let (out_first, out_second) = out.split_at_mut(16);
+    for (h, out) in [(0, out_first), (1, out_second)] {
+        let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words([w0[h], w1[h], w2[h], w3[h]]));
         for (out, word) in out.iter_mut().zip(&words) {
             *out = Splat(*word);
         }

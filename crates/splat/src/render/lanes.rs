@@ -192,9 +192,41 @@ pub(super) fn unpack<V: Vectors>(o: V, c: &Constants<V>, xy: V::I, zi: V::I) -> 
 pub(super) fn splat_words<V: Vectors>(
     o: V,
     c: &Constants<V>,
-    [x, y, z]: [V::F; 3],
+    steps: [V::F; 3],
     intensity: V::I,
 ) -> [V::I; 4] {
+    words_of_rays(o, c, rays(o, c, steps, intensity))
+}
+
+/// The first half of [`splat_words`]: the points in the camera frame, their ranges and
+/// the model's denominators (up to the square root and the division, the chain's
+/// slowest operations), for [`words_of_rays`].
+pub(super) struct Rays<V: Vectors> {
+    pcx: V::F,
+    pcy: V::F,
+    pcz: V::F,
+    rho: V::F,
+    inv_d: V::F,
+    in_domain: V::M,
+    intensity: V::I,
+}
+
+impl<V: Vectors> Clone for Rays<V> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<V: Vectors> Copy for Rays<V> {}
+
+/// [`Rays`] of a register of points.
+#[inline(always)]
+pub(super) fn rays<V: Vectors>(
+    o: V,
+    c: &Constants<V>,
+    [x, y, z]: [V::F; 3],
+    intensity: V::I,
+) -> Rays<V> {
     let [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]] = c.rotation;
     let [tx, ty, tz] = c.translation;
     let pcx = o.add(
@@ -217,6 +249,30 @@ pub(super) fn splat_words<V: Vectors>(
         o.or_m(c.xi_small, o.gt(o.add(o.mul(xi, pcz), rho), c.zero)),
     );
     let inv_d = o.div(c.one, dd);
+    Rays {
+        pcx,
+        pcy,
+        pcz,
+        rho,
+        inv_d,
+        in_domain,
+        intensity,
+    }
+}
+
+/// The second half of [`splat_words`].
+#[inline(always)]
+pub(super) fn words_of_rays<V: Vectors>(o: V, c: &Constants<V>, r: Rays<V>) -> [V::I; 4] {
+    let Rays {
+        pcx,
+        pcy,
+        pcz,
+        rho,
+        inv_d,
+        in_domain,
+        intensity,
+    } = r;
+    let xi = c.xi;
     let u = o.add(
         o.add(
             o.mul(c.alpha_u, o.mul(pcx, inv_d)),
