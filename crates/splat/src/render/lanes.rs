@@ -325,18 +325,18 @@ pub(super) fn words_of_rays<V: Vectors>(o: V, c: &Constants<V>, r: Rays<V>) -> [
 #[derive(Clone, Copy)]
 pub(super) struct Pair<V>(pub(super) V);
 
-/// `f` on both halves.
-#[inline(always)]
-fn both<T: Copy, U>(a: [T; 2], mut f: impl FnMut(T) -> U) -> [U; 2] {
-    let first = f(a[0]);
-    [first, f(a[1])]
-}
-
-/// `f` on both halves of two operands.
-#[inline(always)]
-fn both2<T: Copy, S: Copy, U>(a: [T; 2], b: [S; 2], mut f: impl FnMut(T, S) -> U) -> [U; 2] {
-    let first = f(a[0], b[0]);
-    [first, f(a[1], b[1])]
+/// The methods of [`Vectors`] for [`Pair`] that take registers: each on both halves,
+/// the first's before the second's (no closures: a closure that is not inlined is
+/// compiled without the caller's instruction set).
+macro_rules! on_both {
+    ($(fn $name:ident(self, $($arg:ident: $ty:ty),*) -> $ret:ty;)*) => {
+        $(
+            #[inline(always)]
+            fn $name(self, $($arg: $ty),*) -> $ret {
+                [self.0.$name($($arg[0]),*), self.0.$name($($arg[1]),*)]
+            }
+        )*
+    };
 }
 
 impl<V: Vectors> Vectors for Pair<V> {
@@ -359,101 +359,30 @@ impl<V: Vectors> Vectors for Pair<V> {
         let m = self.0.mask_if(set);
         [m, m]
     }
-    #[inline(always)]
-    fn add(self, a: Self::F, b: Self::F) -> Self::F {
-        both2(a, b, |a, b| self.0.add(a, b))
-    }
-    #[inline(always)]
-    fn sub(self, a: Self::F, b: Self::F) -> Self::F {
-        both2(a, b, |a, b| self.0.sub(a, b))
-    }
-    #[inline(always)]
-    fn mul(self, a: Self::F, b: Self::F) -> Self::F {
-        both2(a, b, |a, b| self.0.mul(a, b))
-    }
-    #[inline(always)]
-    fn div(self, a: Self::F, b: Self::F) -> Self::F {
-        both2(a, b, |a, b| self.0.div(a, b))
-    }
-    #[inline(always)]
-    fn sqrt(self, a: Self::F) -> Self::F {
-        both(a, |a| self.0.sqrt(a))
-    }
-    #[inline(always)]
-    fn max(self, a: Self::F, b: Self::F) -> Self::F {
-        both2(a, b, |a, b| self.0.max(a, b))
-    }
-    #[inline(always)]
-    fn min(self, a: Self::F, b: Self::F) -> Self::F {
-        both2(a, b, |a, b| self.0.min(a, b))
-    }
-    #[inline(always)]
-    fn gt(self, a: Self::F, b: Self::F) -> Self::M {
-        both2(a, b, |a, b| self.0.gt(a, b))
-    }
-    #[inline(always)]
-    fn lt(self, a: Self::F, b: Self::F) -> Self::M {
-        both2(a, b, |a, b| self.0.lt(a, b))
-    }
-    #[inline(always)]
-    fn gt_i(self, a: Self::I, b: Self::I) -> Self::M {
-        both2(a, b, |a, b| self.0.gt_i(a, b))
-    }
-    #[inline(always)]
-    fn and_m(self, a: Self::M, b: Self::M) -> Self::M {
-        both2(a, b, |a, b| self.0.and_m(a, b))
-    }
-    #[inline(always)]
-    fn or_m(self, a: Self::M, b: Self::M) -> Self::M {
-        both2(a, b, |a, b| self.0.or_m(a, b))
-    }
-    #[inline(always)]
-    fn add_i(self, a: Self::I, b: Self::I) -> Self::I {
-        both2(a, b, |a, b| self.0.add_i(a, b))
-    }
-    #[inline(always)]
-    fn sub_i(self, a: Self::I, b: Self::I) -> Self::I {
-        both2(a, b, |a, b| self.0.sub_i(a, b))
-    }
-    #[inline(always)]
-    fn and_i(self, a: Self::I, b: Self::I) -> Self::I {
-        both2(a, b, |a, b| self.0.and_i(a, b))
-    }
-    #[inline(always)]
-    fn or_i(self, a: Self::I, b: Self::I) -> Self::I {
-        both2(a, b, |a, b| self.0.or_i(a, b))
-    }
-    #[inline(always)]
-    fn shl16(self, a: Self::I) -> Self::I {
-        both(a, |a| self.0.shl16(a))
-    }
-    #[inline(always)]
-    fn shr16(self, a: Self::I) -> Self::I {
-        both(a, |a| self.0.shr16(a))
-    }
-    #[inline(always)]
-    fn mul_u16(self, a: Self::I, b: Self::I) -> Self::I {
-        both2(a, b, |a, b| self.0.mul_u16(a, b))
-    }
-    #[inline(always)]
-    fn bits(self, a: Self::F) -> Self::I {
-        both(a, |a| self.0.bits(a))
-    }
-    #[inline(always)]
-    fn to_f32(self, a: Self::I) -> Self::F {
-        both(a, |a| self.0.to_f32(a))
-    }
-    #[inline(always)]
-    fn minus_one_where(self, mask: Self::M, a: Self::I) -> Self::I {
-        both2(mask, a, |m, a| self.0.minus_one_where(m, a))
-    }
-    #[inline(always)]
-    fn plus_one_where(self, mask: Self::M, a: Self::I) -> Self::I {
-        both2(mask, a, |m, a| self.0.plus_one_where(m, a))
-    }
-    #[inline(always)]
-    fn select(self, mask: Self::M, a: Self::I, b: Self::I) -> Self::I {
-        let first = self.0.select(mask[0], a[0], b[0]);
-        [first, self.0.select(mask[1], a[1], b[1])]
+    on_both! {
+        fn add(self, a: Self::F, b: Self::F) -> Self::F;
+        fn sub(self, a: Self::F, b: Self::F) -> Self::F;
+        fn mul(self, a: Self::F, b: Self::F) -> Self::F;
+        fn div(self, a: Self::F, b: Self::F) -> Self::F;
+        fn sqrt(self, a: Self::F) -> Self::F;
+        fn max(self, a: Self::F, b: Self::F) -> Self::F;
+        fn min(self, a: Self::F, b: Self::F) -> Self::F;
+        fn gt(self, a: Self::F, b: Self::F) -> Self::M;
+        fn lt(self, a: Self::F, b: Self::F) -> Self::M;
+        fn gt_i(self, a: Self::I, b: Self::I) -> Self::M;
+        fn and_m(self, a: Self::M, b: Self::M) -> Self::M;
+        fn or_m(self, a: Self::M, b: Self::M) -> Self::M;
+        fn add_i(self, a: Self::I, b: Self::I) -> Self::I;
+        fn sub_i(self, a: Self::I, b: Self::I) -> Self::I;
+        fn and_i(self, a: Self::I, b: Self::I) -> Self::I;
+        fn or_i(self, a: Self::I, b: Self::I) -> Self::I;
+        fn shl16(self, a: Self::I) -> Self::I;
+        fn shr16(self, a: Self::I) -> Self::I;
+        fn mul_u16(self, a: Self::I, b: Self::I) -> Self::I;
+        fn bits(self, a: Self::F) -> Self::I;
+        fn to_f32(self, a: Self::I) -> Self::F;
+        fn minus_one_where(self, mask: Self::M, a: Self::I) -> Self::I;
+        fn plus_one_where(self, mask: Self::M, a: Self::I) -> Self::I;
+        fn select(self, mask: Self::M, a: Self::I, b: Self::I) -> Self::I;
     }
 }
