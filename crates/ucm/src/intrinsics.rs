@@ -261,9 +261,16 @@ impl<T: Real> Params<T> {
             (x, y) = (x * half, y * half);
             pulls += 1;
         }
-        for _ in 0..60 {
-            let [fx, fy] = self.distort(x, y);
+        // Each step is halved until it stays in that region and lowers the residual:
+        // full Newton steps can cycle where the distortion bends strongly (a radial
+        // polynomial near its inflection), and a decreasing residual cannot.
+        let residual = |[fx, fy]: [T; 2]| {
             let (ex, ey) = (fx - xd, fy - yd);
+            ex * ex + ey * ey
+        };
+        let mut f = self.distort(x, y);
+        'newton: for _ in 0..60 {
+            let (ex, ey) = (f[0] - xd, f[1] - yd);
             if ex.abs() <= tolerance && ey.abs() <= tolerance {
                 return Some([x, y]);
             }
@@ -273,17 +280,25 @@ impl<T: Real> Params<T> {
                 return None;
             }
             let (dx, dy) = ((d * ex - b * ey) / det, (a * ey - c * ex) / det);
+            let now = ex * ex + ey * ey;
             let mut step = T::ONE;
             let mut halvings = 0;
-            while !self.before_fold(x - step * dx, y - step * dy) {
+            loop {
+                let (cx, cy) = (x - step * dx, y - step * dy);
+                if self.before_fold(cx, cy) {
+                    let fc = self.distort(cx, cy);
+                    if residual(fc) < now {
+                        (x, y, f) = (cx, cy, fc);
+                        break;
+                    }
+                }
                 if halvings == 60 {
-                    return None;
+                    // No step lowers the residual: at its rounding floor (judged below).
+                    break 'newton;
                 }
                 step *= half;
                 halvings += 1;
             }
-            x -= step * dx;
-            y -= step * dy;
         }
         let [fx, fy] = self.distort(x, y);
         let loose = T::from_f64(1e3) * tolerance;

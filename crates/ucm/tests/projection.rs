@@ -3,7 +3,7 @@
 
 use crate::common::*;
 use proptest::prelude::*;
-use ucm::{Camera, Intrinsics, OutOfView, ValidRegion};
+use ucm::{Camera, Distortion, Intrinsics, OutOfView, ValidRegion};
 
 proptest! {
     /// unproject ∘ project is the identity on the unit sphere, for every valid point.
@@ -284,6 +284,53 @@ fn mei_calibration_loads_and_projects_inside_its_crop() {
     );
 }
 
+/// A distortion whose radial polynomial bends strongly before its fold (k2 > 0, k3 < 0):
+/// full Newton steps from the distorted point cycle between two radii there (the lift
+/// failed with `DistortionFold`); steps that lower the residual reach the point. Every
+/// direction projected on the optical axis's side of the fold lifts back.
+#[test]
+fn pixels_where_the_distortion_bends_lift_back() {
+    let camera = Camera::new(
+        Intrinsics {
+            alpha_u: 100.0,
+            alpha_v: 100.0,
+            u0: 250.0,
+            v0: 180.0,
+            xi: 0.835_824_859_284_494_9,
+            skew: 0.0,
+        },
+        Some(Distortion {
+            k1: -0.021_923_383_860_871_472,
+            k2: 0.044_202_131_262_805_484,
+            p1: 0.0,
+            p2: 0.001_141_598_747_060_272_1,
+            k3: -0.004_192_270_484_036_987,
+        }),
+        640,
+        480,
+        ValidRegion::Full,
+    )
+    .unwrap();
+    let mut lifted = 0;
+    for k in 0..=130 {
+        for a in 0..36 {
+            let (t, az) = (f64::from(k).to_radians(), f64::from(a * 10).to_radians());
+            let p = [t.sin() * az.cos(), t.sin() * az.sin(), t.cos()];
+            let Ok(pixel) = camera.project_unbounded(p) else {
+                continue;
+            };
+            let ray = camera
+                .unproject(pixel)
+                .unwrap_or_else(|e| panic!("{k}° az {}: {pixel:?}: {e:?}", a * 10));
+            let err = (ray[0] - p[0]).abs() + (ray[1] - p[1]).abs() + (ray[2] - p[2]).abs();
+            assert!(err < 1e-8, "{k}° az {}: {err:e}", a * 10);
+            lifted += 1;
+        }
+    }
+    // Up to about 112° off the axis (the point of the failure) at least.
+    assert!(lifted >= 36 * 112, "{lifted} directions");
+}
+
 #[test]
 fn batch_projection_matches_single() {
     let camera = fixture_320();
@@ -321,7 +368,7 @@ fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
         xi: 0.0,
         skew: 0.0,
     };
-    let distortion = ucm::Distortion {
+    let distortion = Distortion {
         k1: 0.2624,
         k2: -0.9531,
         p1: -0.0054,
@@ -331,7 +378,7 @@ fn a_third_radial_coefficient_lifts_and_projects_every_pixel() {
     let camera = Camera::new(intrinsics, Some(distortion), 640, 480, ValidRegion::Full).unwrap();
     let without_k3 = Camera::new(
         intrinsics,
-        Some(ucm::Distortion {
+        Some(Distortion {
             k3: 0.0,
             ..distortion
         }),
