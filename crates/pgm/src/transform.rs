@@ -428,7 +428,7 @@ impl Pgm {
     /// and `k² g` and `(k/λ²) g` if asked for (each a least-squares fit: designed once
     /// per λ, and only when a path needs it).
     fn filters(&mut self, lambda: f32, with_k2g: bool, with_dg: bool) -> Option<Filters> {
-        if lambda < self.options.recursive_from_lambda {
+        if !self.recursive(lambda) {
             return None;
         }
         let mut filters = match self.filters {
@@ -504,12 +504,17 @@ impl Pgm {
         self.features(lambda, jacobian)
     }
 
+    /// Whether the features at `lambda` take the recursive path
+    /// ([`PgmOptions::recursive_from_lambda`]).
+    fn recursive(&self, lambda: f32) -> bool {
+        lambda >= self.options.recursive_from_lambda
+    }
+
     /// Whether the features at `lambda` read the brightness's stored interaction rows:
     /// only the recursive `L_G` does; the exact one filters them a row at a time as it
     /// computes them, eq. (5) reads none.
     fn pixel_rows(&self, lambda: f32, jacobian: PgmJacobian) -> PixelRows {
-        let recursive = lambda >= self.options.recursive_from_lambda;
-        if recursive && jacobian == PgmJacobian::Convolved {
+        if self.recursive(lambda) && jacobian == PgmJacobian::Convolved {
             PixelRows::Stored
         } else {
             PixelRows::OnDemand

@@ -280,7 +280,7 @@ impl<T: Real> Params<T> {
                 return None;
             }
             let (dx, dy) = ((d * ex - b * ey) / det, (a * ey - c * ex) / det);
-            let now = ex * ex + ey * ey;
+            let now = residual(f);
             let mut step = T::ONE;
             let mut halvings = 0;
             loop {
@@ -300,7 +300,8 @@ impl<T: Real> Params<T> {
                 halvings += 1;
             }
         }
-        let [fx, fy] = self.distort(x, y);
+        // `f` is the distortion of the last point.
+        let [fx, fy] = f;
         let loose = T::from_f64(1e3) * tolerance;
         ((fx - xd).abs() <= loose && (fy - yd).abs() <= loose && self.before_fold(x, y))
             .then_some([x, y])
