@@ -73,11 +73,13 @@
 //! reaches it is dropped there (pass 2 would reject it everywhere, since depths only
 //! decrease), so pass 2 reads only the splats that may add a sample: about 40 % of
 //! those drawn at a street pose. The occlusion test of a cell stops at the first tile,
-//! then the first row of its rectangle, that shows it may be visible.
+//! then the first row of its rectangle, that shows it may be visible. The buffers that
+//! a pass reads at scattered pixels are first read in order (`cache`): a caller's work
+//! between two renderings pushes them out of the caches.
 //!
 //! The modules follow the passes: `options` (the settings and what a rendering did),
 //! `view` (a rendering's constants and the buffers' region), `culling` (field of view,
-//! level of detail, occlusion), `splat` (a projected point, as pass 1 writes it and
+//! level of detail, occlusion), `cache` (buffers read in before the passes), `splat` (a projected point, as pass 1 writes it and
 //! pass 2 reads it), `project` (the projection of points into splats: the scalar
 //! reference and the baseline block kernel), `projector` (the same on each instruction
 //! set; its kernels in `avx512`, `avx2` and `sse2`, their arithmetic written once in
@@ -95,6 +97,7 @@ use crate::{PointCloud, SplatError};
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod cache;
 mod culling;
 #[cfg(target_arch = "x86_64")]
 mod lanes;
@@ -327,6 +330,8 @@ impl Renderer {
             }
             self.accum.fill([0; 2]);
         }
+        // Into the caches, for the occlusion tests' and pass 1's scattered reads.
+        cache::read_in(&self.depth);
         // The runs a parallel rendering cuts each pass into (`slots`).
         let runs = if self.options.parallel {
             rayon::current_num_threads().clamp(1, MAX_RUNS)

@@ -30,6 +30,8 @@ fn accumulate(
     accum: &mut [[u64; 2]],
     projector: impl Project,
 ) {
+    // Into the caches before the scattered additions.
+    super::cache::read_in(accum);
     for s in splats.iter().filter(|s| s.drawn()) {
         let (sample, range_sample) = samples(s);
         let limit = s.limit_m();
