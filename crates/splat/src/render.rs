@@ -144,6 +144,9 @@ pub struct Renderer {
     draw: Vec<DrawCell>,
     splats: Vec<Splat>,
     status: Vec<PixelStatus>,
+    /// The hole filling's rows (one byte per column of the image): how many of three
+    /// rows' pixels are hits, and which pixels of the middle row are candidates.
+    hole_rows: [Vec<u8>; 2],
     /// Per pixel of the region: all ones where valid, zero where masked. A cleared
     /// key is `EMPTY & valid_bits`: a masked pixel keeps the key 0 (the nearest range)
     /// through every rendering, so that it never keeps a cell from being culled and
@@ -243,6 +246,7 @@ impl Renderer {
             draw: Vec::new(),
             splats: Vec::new(),
             status,
+            hole_rows: [vec![0; w], vec![0; w]],
             valid_bits,
             tile_farthest: vec![0; tile_count],
             tile_batch: vec![0; tile_count],
@@ -406,7 +410,11 @@ impl Renderer {
 
         let mut pixels_hit = self.resolve(frame);
         if self.options.fill_holes {
+            let t = std::time::Instant::now();
             pixels_hit += self.fill_holes(frame);
+            if std::env::var_os("TFH").is_some() {
+                eprintln!("FH {:.3}", t.elapsed().as_secs_f64() * 1e3);
+            }
         }
         RenderStats {
             cells_drawn: self.draw.len(),

@@ -57,7 +57,11 @@ fn splat_depth(depth: &mut [u32], s: &Splat, view: &View, projector: impl Projec
         let k = s.single_pixel();
         let before = depth[k];
         depth[k] = key.min(before);
-        return !(f32::from_bits(before) < limit);
+        // `!(f32::from_bits(before) < limit)` on the bits: non-negative ranges order as
+        // their bits, and the empty key (`u32::MAX`) above every one, as its NaN
+        // compares false (the limit of a drawn splat is a positive range).
+        debug_assert!(limit > 0.0 && limit.is_finite());
+        return before >= s.0[3];
     }
     if let Some(first) = s.whole_3x3(view, depth.len()) {
         return projector.depth_3x3(depth, first, view.width as usize, key, limit);

@@ -37,7 +37,11 @@ fn accumulate(
         let limit = s.limit_m();
         if s.width() == 1 {
             let k = s.single_pixel();
-            let keep = 0u64.wrapping_sub(u64::from(f32::from_bits(depth[k]) >= limit));
+            // `f32::from_bits(depth[k]) >= limit` on the bits: pass 1 left the pixel a
+            // range at most the splat's (never the empty key), and non-negative ranges
+            // order as their bits.
+            debug_assert!(depth[k] != super::EMPTY);
+            let keep = 0u64.wrapping_sub(u64::from(depth[k] >= s.0[3]));
             let sums = &mut accum[k];
             *sums = [sums[0] + (sample & keep), sums[1] + (range_sample & keep)];
             continue;

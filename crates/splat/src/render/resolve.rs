@@ -66,39 +66,68 @@ impl Renderer {
 
     /// Fill isolated sky pixels surrounded by hits (decided on the statuses before
     /// filling, so the result does not depend on the scan order). Returns the number
-    /// of pixels filled.
+    /// of pixels filled. A row's hit neighbours are counted first for all its pixels at
+    /// once (without a branch): only the sky pixels with three or more are candidates,
+    /// where most sky pixels, in open sky, have none.
     #[inline(always)]
     pub(super) fn fill_holes(&mut self, frame: &mut Frame) -> usize {
-        self.status.copy_from_slice(&frame.status);
         let (w, h) = (frame.width() as usize, frame.height() as usize);
+        if w < 3 || h < 3 {
+            return 0; // no pixel has eight neighbours
+        }
+        self.status.copy_from_slice(&frame.status);
+        let hit = |s: &PixelStatus| u8::from(*s == PixelStatus::Hit);
         let mut filled = 0;
+        let [columns, candidates] = &mut self.hole_rows;
         for j in 1..h.saturating_sub(1) {
-            for i in 1..w - 1 {
-                let k = j * w + i;
-                if self.status[k] != PixelStatus::Sky {
+            let rows = &self.status[(j - 1) * w..(j + 2) * w];
+            let (above, rest) = rows.split_at(w);
+            let (row, below) = rest.split_at(w);
+            for (((count, a), r), b) in columns.iter_mut().zip(above).zip(row).zip(below) {
+                *count = hit(a) + hit(r) + hit(b);
+            }
+            // Sky pixels with three hit neighbours or more (the pixel itself is not a
+            // hit): the candidates, flagged for the row's inner pixels.
+            let inner = w.saturating_sub(2);
+            let sides = columns[..inner].iter().zip(&columns[2..]);
+            let middle = columns[1..].iter().zip(&row[1..]);
+            let flags = candidates[1..=inner].iter_mut().zip(sides.zip(middle));
+            for (flag, ((&left, &right), (&centre, &status))) in flags {
+                let neighbours = left + centre + right;
+                *flag = u8::from(status == PixelStatus::Sky) & u8::from(neighbours >= 3);
+            }
+            for (group, flags) in candidates.chunks(8).enumerate() {
+                let none = match <[u8; 8]>::try_from(flags) {
+                    Ok(eight) => u64::from_ne_bytes(eight) == 0,
+                    Err(_) => flags.iter().all(|&f| f == 0),
+                };
+                if none {
                     continue;
                 }
-                let mut sum = 0.0f32;
-                let mut count = 0;
-                let mut masked = 0;
-                let mut nearest = f32::INFINITY;
-                for dj in [-1isize, 0, 1] {
-                    for di in [-1isize, 0, 1] {
-                        let n = (k as isize + dj * w as isize + di) as usize;
-                        if n != k && self.status[n] == PixelStatus::Hit {
-                            sum += frame.intensity[n];
-                            nearest = nearest.min(frame.range_m[n]);
-                            count += 1;
+                for (offset, _) in flags.iter().enumerate().filter(|(_, f)| **f != 0) {
+                    let k = j * w + group * 8 + offset;
+                    let mut sum = 0.0f32;
+                    let mut count = 0;
+                    let mut masked = 0;
+                    let mut nearest = f32::INFINITY;
+                    for dj in [-1isize, 0, 1] {
+                        for di in [-1isize, 0, 1] {
+                            let n = (k as isize + dj * w as isize + di) as usize;
+                            if n != k && self.status[n] == PixelStatus::Hit {
+                                sum += frame.intensity[n];
+                                nearest = nearest.min(frame.range_m[n]);
+                                count += 1;
+                            }
+                            masked += usize::from(self.status[n] == PixelStatus::Masked);
                         }
-                        masked += usize::from(self.status[n] == PixelStatus::Masked);
                     }
-                }
-                // At the valid region's edge: every valid neighbour (at least 3) hit.
-                if count >= 6 || (count >= 3 && count + masked == 8) {
-                    frame.intensity[k] = sum / count as f32;
-                    frame.range_m[k] = nearest; // the nearest neighbour's mean range
-                    frame.status[k] = PixelStatus::Hit;
-                    filled += 1;
+                    // At the valid region's edge: every valid neighbour (at least 3) hit.
+                    if count >= 6 || (count >= 3 && count + masked == 8) {
+                        frame.intensity[k] = sum / count as f32;
+                        frame.range_m[k] = nearest; // the nearest neighbour's mean range
+                        frame.status[k] = PixelStatus::Hit;
+                        filled += 1;
+                    }
                 }
             }
         }
@@ -149,4 +178,91 @@ fn resolve_row(
     }
     accum.fill([0; 2]);
     hits
+}
+
+#[cfg(test)]
+mod tests {
+    //! The hole filling against its plain definition.
+
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::render::tests::test_setup;
+
+    /// The hole filling as it is defined: every sky pixel inside the image's border,
+    /// looked at in turn, on the statuses before filling.
+    fn fill_holes_plainly(frame: &mut Frame) -> usize {
+        let status = frame.status.clone();
+        let (w, h) = (frame.width() as usize, frame.height() as usize);
+        let mut filled = 0;
+        for j in 1..h - 1 {
+            for i in 1..w - 1 {
+                let k = j * w + i;
+                if status[k] != PixelStatus::Sky {
+                    continue;
+                }
+                let (mut sum, mut count, mut masked, mut nearest) = (0.0f32, 0, 0, f32::INFINITY);
+                for n in [
+                    k - w - 1,
+                    k - w,
+                    k - w + 1,
+                    k - 1,
+                    k,
+                    k + 1,
+                    k + w - 1,
+                    k + w,
+                    k + w + 1,
+                ] {
+                    if n != k && status[n] == PixelStatus::Hit {
+                        sum += frame.intensity[n];
+                        nearest = nearest.min(frame.range_m[n]);
+                        count += 1;
+                    }
+                    masked += usize::from(status[n] == PixelStatus::Masked);
+                }
+                if count >= 6 || (count >= 3 && count + masked == 8) {
+                    frame.intensity[k] = sum / count as f32;
+                    frame.range_m[k] = nearest;
+                    frame.status[k] = PixelStatus::Hit;
+                    filled += 1;
+                }
+            }
+        }
+        filled
+    }
+
+    proptest! {
+        /// The same pixels filled with the same bits as the plain definition, on random
+        /// statuses (hits as dense as `hit_fraction`, some masked pixels).
+        #[test]
+        fn holes_are_filled_as_defined(
+            seed in any::<u64>(),
+            hit_fraction in 0.0f64..1.0,
+            masked_fraction in 0.0f64..0.3,
+        ) {
+            let (camera, options) = test_setup(200.0, 1.0, 0.0, 0.0, 1.25, 8);
+            let mut renderer = Renderer::new(camera.clone(), options).unwrap();
+            let mut frame = Frame::for_camera(&camera);
+            let mut rng = crate::rng::SplitMix64::new(seed);
+            for k in 0..frame.status.len() {
+                let x = rng.unit();
+                frame.status[k] = if x < masked_fraction {
+                    PixelStatus::Masked
+                } else if x < masked_fraction + (1.0 - masked_fraction) * hit_fraction {
+                    PixelStatus::Hit
+                } else {
+                    PixelStatus::Sky
+                };
+                frame.intensity[k] = rng.unit() as f32;
+                frame.range_m[k] = 1.0 + 10.0 * rng.unit() as f32;
+            }
+            let mut expected = frame.clone();
+            let expected_filled = fill_holes_plainly(&mut expected);
+            prop_assert_eq!(renderer.fill_holes(&mut frame), expected_filled);
+            prop_assert_eq!(&frame.status, &expected.status);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&frame.intensity), bits(&expected.intensity));
+            prop_assert_eq!(bits(&frame.range_m), bits(&expected.range_m));
+        }
+    }
 }
