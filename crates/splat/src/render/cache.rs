@@ -3,7 +3,7 @@
 /// Read one element of each 64-byte line of `buffer`, in order. Between two renderings
 /// the work of their caller (a PGM's planes, several megabytes) pushes the renderer's
 /// buffers out of the caches, and the passes read them at scattered pixels: pass 1 its
-/// depth keys, pass 2 its sums (16 bytes a pixel, 4.9 MB at 640×480), each access then
+/// depth keys, pass 2 its sums (16 bytes a pixel, 3.5 MB at 640×480), each access then
 /// waiting on memory. Read in order first, the hardware prefetchers stream them in at
 /// the memory's bandwidth (`docs/RESULTS.md`, "Speed"). Only the time depends on it.
 #[inline(always)]
