@@ -79,13 +79,14 @@
 //!
 //! The modules follow the passes: `options` (the settings and what a rendering did),
 //! `view` (a rendering's constants and the buffers' region), `culling` (field of view,
-//! level of detail, occlusion), `cache` (buffers read in before the passes), `splat` (a projected point, as pass 1 writes it and
-//! pass 2 reads it), `project` (the projection of points into splats: the scalar
-//! reference and the baseline block kernel), `projector` (the same on each instruction
-//! set; its kernels in `avx512`, `avx2` and `sse2`, their arithmetic written once in
-//! `lanes`), `pass_one` (depth), `pass_two` (accumulation) and `resolve` (means, sky,
-//! masks, hole filling); `slots` runs both passes on several threads, each on buffers
-//! of its own. This file holds the [`Renderer`] and the order of its passes.
+//! level of detail, occlusion), `cache` (buffers read in before the passes), `splat` (a
+//! projected point, as pass 1 writes it and pass 2 reads it), `project` (the projection
+//! of points into splats: the scalar reference and the baseline block kernel),
+//! `projector` (the same on each instruction set; its kernels in `avx512`, `avx2` and
+//! `sse2`, their arithmetic written once in `lanes`), `pass_one` (depth), `pass_two`
+//! (accumulation) and `resolve` (means, sky, masks, hole filling); `slots` runs both
+//! passes on several threads, each on buffers of its own. This file holds the
+//! [`Renderer`] and the order of its passes.
 
 use ucm::{Camera, Isometry3};
 
@@ -410,11 +411,7 @@ impl Renderer {
 
         let mut pixels_hit = self.resolve(frame);
         if self.options.fill_holes {
-            let t = std::time::Instant::now();
             pixels_hit += self.fill_holes(frame);
-            if std::env::var_os("TFH").is_some() {
-                eprintln!("FH {:.3}", t.elapsed().as_secs_f64() * 1e3);
-            }
         }
         RenderStats {
             cells_drawn: self.draw.len(),
