@@ -58,9 +58,9 @@ fn splat_depth(depth: &mut [u32], s: &Splat, view: &View, projector: impl Projec
         let before = depth[k];
         depth[k] = key.min(before);
         // `!(f32::from_bits(before) < limit)` on the bits: non-negative ranges order as
-        // their bits, and the empty key (`u32::MAX`) above every one, as its NaN
-        // compares false (the limit of a drawn splat is a positive range).
-        debug_assert!(limit > 0.0 && limit.is_finite());
+        // their bits (up to +∞), and the empty key (`u32::MAX`) above every one, as its
+        // NaN compares false (the limit of a drawn splat is non-negative, not a NaN).
+        debug_assert!(s.0[3] <= f32::INFINITY.to_bits());
         return before >= s.0[3];
     }
     if let Some(first) = s.whole_3x3(view, depth.len()) {

@@ -185,6 +185,7 @@ mod tests {
     //! The hole filling against its plain definition.
 
     use proptest::prelude::*;
+    use ucm::{Camera, Intrinsics, ValidRegion};
 
     use super::*;
     use crate::render::tests::test_setup;
@@ -233,14 +234,25 @@ mod tests {
 
     proptest! {
         /// The same pixels filled with the same bits as the plain definition, on random
-        /// statuses (hits as dense as `hit_fraction`, some masked pixels).
+        /// statuses (hits as dense as `hit_fraction`, some masked pixels), in images of
+        /// any size (rows shorter than a group of eight flags, or than three pixels).
         #[test]
         fn holes_are_filled_as_defined(
             seed in any::<u64>(),
             hit_fraction in 0.0f64..1.0,
             masked_fraction in 0.0f64..0.3,
+            (width, height) in prop_oneof![Just((320u32, 240u32)), (1u32..40, 1u32..40)],
         ) {
-            let (camera, options) = test_setup(200.0, 1.0, 0.0, 0.0, 1.25, 8);
+            let (_, options) = test_setup(200.0, 1.0, 0.0, 0.0, 1.25, 8);
+            let intrinsics = Intrinsics {
+                alpha_u: 200.0,
+                alpha_v: 200.0,
+                u0: f64::from(width) / 2.0,
+                v0: f64::from(height) / 2.0,
+                xi: 0.0,
+                skew: 0.0,
+            };
+            let camera = Camera::new(intrinsics, None, width, height, ValidRegion::Full).unwrap();
             let mut renderer = Renderer::new(camera.clone(), options).unwrap();
             let mut frame = Frame::for_camera(&camera);
             let mut rng = crate::rng::SplitMix64::new(seed);
