@@ -166,12 +166,13 @@ impl Ops {
         ]
     }
 
-    /// Eight points of two 32-bit words each (points 0–3 in `a`, 4–7 in `b`): their
-    /// first words, then their second words, each register in the lanes' order of
-    /// [`Ops::transpose_halves`] (points 0, 2, 4, 6 | 1, 3, 5, 7).
+    /// Eight points of two 32-bit words each (8 bytes): their first words, then their
+    /// second words, each register in the lanes' order of [`Ops::transpose_halves`]
+    /// (points 0, 2, 4, 6 | 1, 3, 5, 7).
     #[inline(always)]
-    fn words_of_points(self, a: __m256i, b: __m256i) -> [__m256i; 2] {
+    fn words_of_eight(self, points: &[PackedPoint; 8]) -> [__m256i; 2] {
         let (avx, avx2) = (self.0.avx, self.0.avx2);
+        let [a, b]: [__m256i; 2] = pulp::cast(*points);
         let (a, b) = (avx._mm256_castsi256_ps(a), avx._mm256_castsi256_ps(b));
         // Within each half: points 0, 1, 4, 5 | 2, 3, 6, 7.
         let first = avx._mm256_castps_si256(avx._mm256_shuffle_ps::<0b10_00_10_00>(a, b));
@@ -181,6 +182,16 @@ impl Ops {
             avx2._mm256_permutevar8x32_epi32(first, order),
             avx2._mm256_permutevar8x32_epi32(second, order),
         ]
+    }
+
+    /// Eight splats from one register per word (in the lanes' order of
+    /// [`Ops::words_of_eight`]), transposed back to four words per point.
+    #[inline(always)]
+    fn store_splats(self, words: [__m256i; 4], out: &mut [Splat; 8]) {
+        let words: [[u32; 4]; 8] = pulp::cast(self.transpose_halves(words));
+        for (out, word) in out.iter_mut().zip(&words) {
+            *out = Splat(*word);
+        }
     }
 }
 
@@ -223,16 +234,9 @@ pub(super) fn project_splats(
     for (points, out) in points.iter().zip(out) {
         // Eight points of 8 bytes, their words taken apart: points 0, 2, 4, 6 |
         // 1, 3, 5, 7.
-        let [a, b]: [__m256i; 2] = pulp::cast(*points);
-        let [xy, zi] = o.words_of_points(a, b);
+        let [xy, zi] = o.words_of_eight(points);
         let (steps, intensity) = unpack(o, &constants, xy, zi);
-        // One register per word of the splats, transposed back to four words per
-        // point: points 0 | 1, 2 | 3, 4 | 5, 6 | 7.
-        let words = splat_words(o, &constants, steps, intensity);
-        let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves(words));
-        for (out, word) in out.iter_mut().zip(&words) {
-            *out = Splat(*word);
-        }
+        o.store_splats(splat_words(o, &constants, steps, intensity), out);
     }
 }
 
@@ -244,8 +248,8 @@ fn pair_rays(
     constants: &Constants<Pair<Ops>>,
     points: &[PackedPoint; 16],
 ) -> Rays<Pair<Ops>> {
-    let [a, b, c, d]: [__m256i; 4] = pulp::cast(*points);
-    let ([xy0, zi0], [xy1, zi1]) = (o.words_of_points(a, b), o.words_of_points(c, d));
+    let [first, second]: [[PackedPoint; 8]; 2] = pulp::cast(*points);
+    let ([xy0, zi0], [xy1, zi1]) = (o.words_of_eight(&first), o.words_of_eight(&second));
     let (steps, intensity) = unpack(Pair(o), constants, [xy0, xy1], [zi0, zi1]);
     rays(Pair(o), constants, steps, intensity)
 }
@@ -254,12 +258,8 @@ fn pair_rays(
 #[inline(always)]
 fn store_pair(o: Ops, constants: &Constants<Pair<Ops>>, r: Rays<Pair<Ops>>, out: &mut [Splat; 16]) {
     let [w0, w1, w2, w3] = words_of_rays(Pair(o), constants, r);
-    let (out_first, out_second) = out.split_at_mut(8);
-    for (h, out) in [(0, out_first), (1, out_second)] {
-        let words: [[u32; 4]; 8] = pulp::cast(o.transpose_halves([w0[h], w1[h], w2[h], w3[h]]));
-        for (out, word) in out.iter_mut().zip(&words) {
-            *out = Splat(*word);
-        }
+    for (h, out) in out.as_chunks_mut::<8>().0.iter_mut().enumerate() {
+        o.store_splats([w0[h], w1[h], w2[h], w3[h]], out);
     }
 }
 

@@ -158,9 +158,17 @@ impl Ops {
         self.0.avx512f._mm512_permutex2var_epi32(a, idx, b)
     }
 
-    /// One register per word of sixteen splats, transposed to four words per point.
+    /// Sixteen points of two 32-bit words each: their first words, then their second
+    /// words, gathered by two two-source permutes.
     #[inline(always)]
-    fn splats_of_words(self, [w0, w1, w2, w3]: [__m512i; 4]) -> [__m512i; 4] {
+    fn words_of_sixteen(self, points: &[PackedPoint; 16]) -> [__m512i; 2] {
+        let [a, b]: [__m512i; 2] = pulp::cast(*points);
+        [self.permute_i(a, EVENS, b), self.permute_i(a, ODDS, b)]
+    }
+
+    /// Sixteen splats from one register per word, transposed to four words per point.
+    #[inline(always)]
+    fn store_splats(self, [w0, w1, w2, w3]: [__m512i; 4], out: &mut [Splat; 16]) {
         let (w01_lo, w01_hi) = (
             self.permute_i(w0, PAIRS_LOW, w1),
             self.permute_i(w0, PAIRS_HIGH, w1),
@@ -169,12 +177,16 @@ impl Ops {
             self.permute_i(w2, PAIRS_LOW, w3),
             self.permute_i(w2, PAIRS_HIGH, w3),
         );
-        [
+        let quads = [
             self.permute_i(w01_lo, QUADS_LOW, w23_lo),
             self.permute_i(w01_lo, QUADS_HIGH, w23_lo),
             self.permute_i(w01_hi, QUADS_LOW, w23_hi),
             self.permute_i(w01_hi, QUADS_HIGH, w23_hi),
-        ]
+        ];
+        let words: [[u32; 4]; 16] = pulp::cast(quads);
+        for (out, word) in out.iter_mut().zip(&words) {
+            *out = Splat(*word);
+        }
     }
 }
 
@@ -208,17 +220,9 @@ pub(super) fn project_splats(
     let (points, _) = rest.as_chunks::<16>();
     let (out, _) = out_rest.as_chunks_mut::<16>();
     for (points, out) in points.iter().zip(out) {
-        // Sixteen points of two 32-bit words each, their first and second words
-        // gathered by two two-source permutes.
-        let [a, b]: [__m512i; 2] = pulp::cast(*points);
-        let (xy, zi) = (o.permute_i(a, EVENS, b), o.permute_i(a, ODDS, b));
+        let [xy, zi] = o.words_of_sixteen(points);
         let (steps, intensity) = unpack(o, &constants, xy, zi);
-        // One register per word of the splats, transposed to four words per point.
-        let words = splat_words(o, &constants, steps, intensity);
-        let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words(words));
-        for (out, word) in out.iter_mut().zip(&words) {
-            *out = Splat(*word);
-        }
+        o.store_splats(splat_words(o, &constants, steps, intensity), out);
     }
 }
 
@@ -230,10 +234,9 @@ fn pair_rays(
     constants: &Constants<Pair<Ops>>,
     points: &[PackedPoint; 32],
 ) -> Rays<Pair<Ops>> {
-    let [a, b, c, d]: [__m512i; 4] = pulp::cast(*points);
-    let xy = [o.permute_i(a, EVENS, b), o.permute_i(c, EVENS, d)];
-    let zi = [o.permute_i(a, ODDS, b), o.permute_i(c, ODDS, d)];
-    let (steps, intensity) = unpack(Pair(o), constants, xy, zi);
+    let [first, second]: [[PackedPoint; 16]; 2] = pulp::cast(*points);
+    let ([xy0, zi0], [xy1, zi1]) = (o.words_of_sixteen(&first), o.words_of_sixteen(&second));
+    let (steps, intensity) = unpack(Pair(o), constants, [xy0, xy1], [zi0, zi1]);
     rays(Pair(o), constants, steps, intensity)
 }
 
@@ -241,12 +244,8 @@ fn pair_rays(
 #[inline(always)]
 fn store_pair(o: Ops, constants: &Constants<Pair<Ops>>, r: Rays<Pair<Ops>>, out: &mut [Splat; 32]) {
     let [w0, w1, w2, w3] = words_of_rays(Pair(o), constants, r);
-    let (out_first, out_second) = out.split_at_mut(16);
-    for (h, out) in [(0, out_first), (1, out_second)] {
-        let words: [[u32; 4]; 16] = pulp::cast(o.splats_of_words([w0[h], w1[h], w2[h], w3[h]]));
-        for (out, word) in out.iter_mut().zip(&words) {
-            *out = Splat(*word);
-        }
+    for (h, out) in out.as_chunks_mut::<16>().0.iter_mut().enumerate() {
+        o.store_splats([w0[h], w1[h], w2[h], w3[h]], out);
     }
 }
 
