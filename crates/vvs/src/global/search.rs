@@ -181,8 +181,17 @@ impl<'a> Servo<'a> {
         // reports), taken into the lists as they come.
         let batch = self.search_threads() * ITEMS_PER_REPORT;
         let mut first_node = 0;
+        let mut ranks = Vec::new();
         while first_node < nodes.len() {
             let last_node = (first_node + batch).min(nodes.len());
+            // On the common support, candidates that cannot enter either list's best
+            // are not compared (`Compared::Bounded`): what `select` keeps is the same,
+            // whatever the batches.
+            let bound = if common {
+                screening_bound(&screened, &squared, settings.screened, &mut ranks)
+            } else {
+                f64::INFINITY
+            };
             let node_scores = self.on_workers(
                 first_node..last_node,
                 &mut scores,
@@ -193,6 +202,7 @@ impl<'a> Servo<'a> {
                         &node_pose(index, 0),
                         lambda,
                         &orientations,
+                        Compared::Bounded(bound),
                         scores,
                     )?;
                     let pairs = scores.costs.iter().zip(&scores.squared);
@@ -551,7 +561,14 @@ impl<'a> Servo<'a> {
     ) -> Result<f64, VvsError> {
         match (self.config.support == Support::Common, identity) {
             (true, Some(identity)) => {
-                self.search_cost(search, pose, lambda, orientations, scores)?;
+                self.search_cost(
+                    search,
+                    pose,
+                    lambda,
+                    orientations,
+                    Compared::Only(identity),
+                    scores,
+                )?;
                 Ok(scores.costs[identity])
             }
             _ => Ok(result.cost),
@@ -697,13 +714,17 @@ impl<'a> Servo<'a> {
     /// on the common support; infinite where the pose is outside the cloud's enlarged bounds or sees
     /// too little of it): the mean squared PGM residual, or on the common support the
     /// fraction of the picture left unexplained by the PGMs' correlation and by their
-    /// coefficient of determination ([`crate::global`]).
+    /// coefficient of determination ([`crate::global`]). Only the orientations that
+    /// `compared` asks for are compared, the others' scores left infinite: a descent's
+    /// rank reads one, and the screening skips those whose coverage alone puts both
+    /// scores beyond its bound (two PGMs saved each).
     fn search_cost(
         &mut self,
         level: usize,
         world_from_camera: &Isometry3,
         lambda: f32,
         o: &Orientations,
+        compared: Compared,
         scores: &mut Scores,
     ) -> Result<(), VvsError> {
         let Scores {
@@ -740,15 +761,26 @@ impl<'a> Servo<'a> {
             // Each orientation on its own common support: the node's hits that the
             // turned picture observes.
             let samples = pgm.samples().len().max(1);
-            for ((((cost, squared), picture), weights), &masked) in costs
+            let candidates = costs
                 .iter_mut()
                 .zip(squared.iter_mut())
                 .zip(&o.pictures)
                 .zip(o.weights.chunks_exact(samples))
                 .zip(&o.masked)
-            {
+                .enumerate();
+            for (orientation, ((((cost, squared), picture), weights), &masked)) in candidates {
+                if !compared.wants(orientation) {
+                    continue;
+                }
                 for ((s, &v), status) in support.iter_mut().zip(&picture.valid).zip(&frame.status) {
                     *s = v && *status == PixelStatus::Hit;
+                }
+                let compared_px = support.iter().filter(|&&s| s).count() as f64;
+                let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
+                let coverage = compared_px / observed;
+                // Both scores are at least `1 - coverage` (`r <= 1`).
+                if compared.beyond_bound(1.0 - coverage) {
+                    continue;
                 }
                 let g = pgm.transform(&Restricted::new(&*frame, support)?, lambda)?;
                 scratch.clear();
@@ -768,9 +800,6 @@ impl<'a> Servo<'a> {
                     bb += w * b * b;
                     ab += w * a * b;
                 }
-                let compared = support.iter().filter(|&&s| s).count() as f64;
-                let observed = picture.valid.iter().filter(|&&v| v).count().max(1) as f64;
-                let coverage = compared / observed;
                 let (ma, mb) = (a_sum / w_sum.max(1e-30), b_sum / w_sum.max(1e-30));
                 let (va, vb) = (aa / w_sum - ma * ma, bb / w_sum - mb * mb);
                 // A flat PGM on either side (no variance to explain, or rounding's)
@@ -794,12 +823,16 @@ impl<'a> Servo<'a> {
         }
         let g = pgm.transform(frame, lambda)?;
         let n = g.len().max(1);
-        for (((cost, desired), weights), &masked) in costs
+        let candidates = costs
             .iter_mut()
             .zip(o.desired.chunks_exact(n))
             .zip(o.weights.chunks_exact(n))
             .zip(&o.masked)
-        {
+            .enumerate();
+        for (orientation, (((cost, desired), weights), &masked)) in candidates {
+            if !compared.wants(orientation) {
+                continue;
+            }
             if !masked {
                 let sum: f64 = g
                     .iter()
@@ -826,6 +859,56 @@ impl<'a> Servo<'a> {
         }
         Ok(())
     }
+}
+
+/// Which orientations [`Servo::search_cost`] compares.
+#[derive(Clone, Copy, Debug)]
+enum Compared {
+    /// Every one whose scores could be at most this (on the common support; the others'
+    /// stay infinite).
+    Bounded(f64),
+    /// This one alone.
+    Only(usize),
+}
+
+impl Compared {
+    fn wants(self, orientation: usize) -> bool {
+        match self {
+            Self::Bounded(_) => true,
+            Self::Only(o) => o == orientation,
+        }
+    }
+
+    /// Whether a lower bound of a candidate's scores puts it beyond the bound: it
+    /// would not be among the best of either list.
+    fn beyond_bound(self, lower: f64) -> bool {
+        matches!(self, Self::Bounded(bound) if lower > bound)
+    }
+}
+
+/// The bound of the screening on the common support, from the scores so far: a
+/// candidate with a score above it in both lists is not among the `count` best that
+/// `select` takes from each (it may take up to `2 count` from one list, when the other's
+/// are taken already).
+fn screening_bound(
+    screened: &[Candidate],
+    squared: &[Candidate],
+    count: usize,
+    ranks: &mut Vec<f64>,
+) -> f64 {
+    let depth = 2 * count;
+    worst_kept(screened, depth, ranks).max(worst_kept(squared, depth, ranks))
+}
+
+/// The `depth`-th best score of `list` (infinite while it holds fewer): a candidate
+/// scoring above it cannot be among `list`'s `depth` best, whatever comes after.
+fn worst_kept(list: &[Candidate], depth: usize, ranks: &mut Vec<f64>) -> f64 {
+    if depth == 0 || list.len() < depth {
+        return f64::INFINITY;
+    }
+    ranks.clear();
+    ranks.extend(list.iter().map(|c| c.0));
+    *ranks.select_nth_unstable_by(depth - 1, f64::total_cmp).1
 }
 
 /// The candidates that descend: the `screened` best by cost; on the common support
@@ -916,6 +999,54 @@ mod tests {
     use super::*;
     use crate::VvsConfig;
 
+    /// The screening's bound leaves `select`'s choice as it is: candidates (each with
+    /// both scores, as on the common support) come in batches, and those whose lower
+    /// bound exceeds the bound computed before their batch are dropped.
+    #[test]
+    fn candidates_beyond_the_bound_are_never_selected() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut dropped_any = false;
+        for case in 0..300 {
+            let count = 1 + case % 7;
+            let per_node = 1 + case % 5;
+            let nodes = 5 + (next() * 60.0) as usize;
+            let (mut all, mut all_squared) = (Vec::new(), Vec::new());
+            let (mut kept, mut kept_squared) = (Vec::new(), Vec::new());
+            let mut ranks = Vec::new();
+            for batch in (0..nodes).collect::<Vec<_>>().chunks(1 + case % 4) {
+                let bound = screening_bound(&kept, &kept_squared, count, &mut ranks);
+                for &index in batch {
+                    for orientation in 0..per_node {
+                        // Coarse scores, so that ties occur.
+                        let cost = (next() * 20.0).floor() / 20.0;
+                        let squared = (next() * 20.0).floor() / 20.0;
+                        let lower = cost.min(squared) - next() * 0.1;
+                        all.push((cost, index, orientation));
+                        all_squared.push((squared, index, orientation));
+                        if Compared::Bounded(bound).beyond_bound(lower) {
+                            dropped_any = true;
+                            continue;
+                        }
+                        kept.push((cost, index, orientation));
+                        kept_squared.push((squared, index, orientation));
+                    }
+                }
+            }
+            assert_eq!(
+                select(all, all_squared, true, count),
+                select(kept, kept_squared, true, count),
+                "case {case}"
+            );
+        }
+        assert!(dropped_any, "the bound never dropped a candidate");
+    }
+
     /// A node outside the cloud's bounds scores nothing on either of the common
     /// support's lists: neither keeps the scores of the node screened before it.
     #[test]
@@ -933,7 +1064,14 @@ mod tests {
         };
         let far = Isometry3::from_translation(DVec3::new(1e4, 0.0, 0.0));
         servo
-            .search_cost(0, &far, 3.0, &Orientations::default(), &mut scores)
+            .search_cost(
+                0,
+                &far,
+                3.0,
+                &Orientations::default(),
+                Compared::Bounded(f64::INFINITY),
+                &mut scores,
+            )
             .unwrap();
         assert!(
             scores
@@ -1106,7 +1244,14 @@ mod tests {
         let near = truth * Isometry3::from_pose_vector([0.8, -0.7, 0.6, 0.0, 0.0, 0.0]).unwrap();
         let mut scores = Scores::new(angles.len());
         servo
-            .search_cost(search, &near, lambda, &o, &mut scores)
+            .search_cost(
+                search,
+                &near,
+                lambda,
+                &o,
+                Compared::Bounded(f64::INFINITY),
+                &mut scores,
+            )
             .unwrap();
         let near = [scores.costs[identity], scores.squared[identity]];
         // A node of the search from a corner of the box (its orientation turned by each
@@ -1115,7 +1260,14 @@ mod tests {
             Isometry3::from_pose_vector([54.758, -4.8946, 17.917, -2.65819, 0.72759, -0.48506])
                 .unwrap();
         servo
-            .search_cost(search, &above, lambda, &o, &mut scores)
+            .search_cost(
+                search,
+                &above,
+                lambda,
+                &o,
+                Compared::Bounded(f64::INFINITY),
+                &mut scores,
+            )
             .unwrap();
         let best = |scores: &[f64]| scores.iter().copied().fold(f64::INFINITY, f64::min);
         let above = [best(&scores.costs), best(&scores.squared)];
