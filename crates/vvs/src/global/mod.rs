@@ -25,8 +25,8 @@
 //!    and tilt (resampled once per orientation, [`turned_about_optical_axis`],
 //!    [`turned`]); a tilt leaves part of the field unobserved, and only the samples
 //!    farther than 2λ from it are compared (on the common support, candidates whose
-//!    coverage alone puts them beyond the best kept so far are not compared: the
-//!    same candidates are kept). The [`GlobalConfig::screened`] best
+//!    coverage alone puts both scores beyond the `2 screened`-th best of each list so
+//!    far are not compared: the same candidates are kept). The [`GlobalConfig::screened`] best
 //!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
 //!    and are ranked again by their cost (with [`GlobalConfig::prune_after_iterations`],
 //!    every descent first runs that many iterations and only the
