@@ -75,6 +75,7 @@
 
 mod prior;
 mod search;
+mod select;
 
 pub(crate) use search::SearchWorker;
 mod turn;
