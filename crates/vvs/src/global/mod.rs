@@ -26,8 +26,9 @@
 //!    [`turned`]); a tilt leaves part of the field unobserved, and only the samples
 //!    farther than 2λ from it are compared (on the common support, candidates whose
 //!    coverage alone puts both scores beyond the `2 screened`-th best of each list so
-//!    far are not compared: the same candidates are kept). The [`GlobalConfig::screened`] best
-//!    run [`GlobalConfig::descent_iterations`] iterations of step 1 there (λ optimised),
+//!    far are not compared: the same candidates are kept). The
+//!    [`GlobalConfig::screened`] best run [`GlobalConfig::descent_iterations`]
+//!    iterations of step 1 there (λ optimised),
 //!    and are ranked again by their cost (with [`GlobalConfig::prune_after_iterations`],
 //!    every descent first runs that many iterations and only the
 //!    [`GlobalConfig::pruned_to`] best run on: the `Localizer`'s default, 3 then the 10

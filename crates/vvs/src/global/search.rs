@@ -868,6 +868,8 @@ mod tests {
     use super::*;
     use crate::VvsConfig;
 
+    /// A node outside the cloud's bounds scores nothing on either of the common
+    /// support's lists: neither keeps the scores of the node screened before it.
     #[test]
     fn a_node_outside_the_cloud_is_no_candidate() {
         let (cloud, camera) = crate::servo::test_plane();
@@ -992,7 +994,9 @@ mod tests {
     /// picture left unexplained, it ranks below a candidate a grid node away from the
     /// truth by both of the common support's scores (divided by the fraction compared
     /// instead, such candidates led both lists and the search failed 11 of 14 runs
-    /// twice the box: `docs/RESULTS.md`).
+    /// twice the box: `docs/RESULTS.md`). At the node near the truth, what
+    /// `Compared` spares changes no score compared: one orientation alone keeps its
+    /// bits, and a bound skips only candidates that score above it on both lists.
     #[test]
     fn a_candidate_seeing_a_flat_patch_does_not_outscore_one_near_the_truth() {
         use world::city::{City, CityParams, camera_looking_down};
@@ -1026,19 +1030,81 @@ mod tests {
         assert_eq!(angles.len(), 125);
         let identity = angles.iter().position(|a| *a == [0.0; 3]).unwrap();
         // A grid node of 2 m × 2 m × 1.5 m is at most this far from the truth.
-        let near = truth * Isometry3::from_pose_vector([0.8, -0.7, 0.6, 0.0, 0.0, 0.0]).unwrap();
+        let near_pose =
+            truth * Isometry3::from_pose_vector([0.8, -0.7, 0.6, 0.0, 0.0, 0.0]).unwrap();
         let mut scores = Scores::new(angles.len());
         servo
             .search_cost(
                 search,
-                &near,
+                &near_pose,
                 lambda,
                 &o,
                 Compared::Bounded(f64::INFINITY),
                 &mut scores,
             )
             .unwrap();
+        let unbounded = (scores.costs.clone(), scores.squared.clone());
         let near = [scores.costs[identity], scores.squared[identity]];
+        // One orientation alone: its bits, the others not compared.
+        servo
+            .search_cost(
+                search,
+                &near_pose,
+                lambda,
+                &o,
+                Compared::Only(identity),
+                &mut scores,
+            )
+            .unwrap();
+        for k in 0..angles.len() {
+            let (cost, squared) = (scores.costs[k], scores.squared[k]);
+            if k == identity {
+                assert_eq!(cost.to_bits(), unbounded.0[k].to_bits());
+                assert_eq!(squared.to_bits(), unbounded.1[k].to_bits());
+            } else {
+                assert!(
+                    cost.is_infinite() && squared.is_infinite(),
+                    "orientation {k}"
+                );
+            }
+        }
+        // A finite bound: each orientation scores as without it, or is skipped and
+        // would have scored above it on both lists (the screening's claim).
+        for bound in [0.0, 0.5] {
+            servo
+                .search_cost(
+                    search,
+                    &near_pose,
+                    lambda,
+                    &o,
+                    Compared::Bounded(bound),
+                    &mut scores,
+                )
+                .unwrap();
+            let mut skipped = 0;
+            for k in 0..angles.len() {
+                let (cost, squared) = (scores.costs[k], scores.squared[k]);
+                if cost.is_infinite() && unbounded.0[k].is_finite() {
+                    skipped += 1;
+                    assert!(
+                        unbounded.0[k] > bound && unbounded.1[k] > bound,
+                        "orientation {k}"
+                    );
+                    assert!(squared.is_infinite());
+                } else {
+                    assert_eq!(cost.to_bits(), unbounded.0[k].to_bits(), "orientation {k}");
+                    assert_eq!(
+                        squared.to_bits(),
+                        unbounded.1[k].to_bits(),
+                        "orientation {k}"
+                    );
+                }
+            }
+            // Under the city's sky no candidate covers the whole picture.
+            if bound == 0.0 {
+                assert!(skipped > 0, "a bound of 0 skipped nothing");
+            }
+        }
         // A node of the search from a corner of the box (its orientation turned by each
         // of the box's orientations): above the roofs across the street.
         let above =

@@ -192,8 +192,6 @@ mod tests {
         assert!(dropped_any, "the bound never dropped a candidate");
     }
 
-    /// A node outside the cloud's bounds scores nothing on either of the common
-    /// support's lists: neither keeps the scores of the node screened before it.
     /// The descents refined: the best, then those ranked within `refine_within` of it
     /// (at most `refined`), duplicates within the merge distance (at most a quarter of
     /// the grid spacing) left out.
