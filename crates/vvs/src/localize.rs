@@ -131,11 +131,10 @@ pub struct Localizer {
     /// window (not `intermediate_stall_window`: a descent may end a grid spacing away);
     /// the screening and the descents, at a quarter of the resolution, render one point
     /// in 16 of the cloud in 4 m cells (`global.thin_search_cloud`: a search from the
-    /// paper's box in 0.59 s instead of 1.2–1.4 with AVX-512, 0.84 s without, one core
-    /// of the Intel VM; the same success on the city's protocols; 7-Scenes' block 5/6
-    /// against the SfM poses instead of 6/6, its sixth query ending at its optimum
-    /// 5.02 cm from its pose instead of 4.97: `docs/RESULTS.md`, "Speed"). A tracker's
-    /// recovery searches so too.
+    /// paper's box 1.4–2.4 times faster on the Intel VM, with the same success on the
+    /// city's protocols and on 7-Scenes' held-out block, 6/6 against the SfM poses:
+    /// `docs/RESULTS.md`, "Speed" and "Real pictures"). A tracker's recovery searches so
+    /// too.
     pub config: VvsConfig,
     /// The local method run without a prior box (default: Rule2; [`Method::Global`]
     /// asks for the prior box below, [`VvsError::GlobalWithoutPrior`] without one).

@@ -2,7 +2,7 @@
 //!
 //! The paper's rules are local: from ±8 m along the street they converge only where the
 //! PGM cost at λ* has no other minimum on the way (`docs/RESULTS.md`: on our city the
-//! basin of Rule2 ends near half of the paper's offsets). A robot rarely starts blind,
+//! basin of Rule2 ends 2 m along the street, a quarter of the paper's 8 m). A robot rarely starts blind,
 //! though: a GPS fix and a compass bound its pose to a box. Inside such a box this
 //! search finds the pose in three phases, every one deterministic:
 //!
