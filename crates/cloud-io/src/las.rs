@@ -59,8 +59,12 @@ fn las_error(path: &Path) -> impl Fn(las::Error) -> CloudIoError + '_ {
 }
 
 /// Refuse a LAZ file whose `laszip` record describes no point item (the `laz` crate
-/// panics on one rather than report it): a corrupt file.
-fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), CloudIoError> {
+/// panics on one rather than report it): a corrupt file. Returns the record, if the
+/// file has one that reads.
+fn check_laz_items(
+    path: &Path,
+    raw: &las::raw::Header,
+) -> Result<Option<laz::LazVlr>, CloudIoError> {
     use std::io::{Seek, SeekFrom};
     let io_error = |source| CloudIoError::Io {
         path: path.to_owned(),
@@ -71,22 +75,116 @@ fn check_laz_items(path: &Path, raw: &las::raw::Header) -> Result<(), CloudIoErr
         .map_err(io_error)?;
     for _ in 0..raw.number_of_variable_length_records {
         let Ok(vlr) = las::raw::Vlr::read_from(&mut file, false) else {
-            return Ok(()); // a truncated record list: `las` reports it
+            return Ok(None); // a truncated record list: `las` reports it
         };
         let user_id = String::from_utf8_lossy(&vlr.user_id);
         if vlr.record_id == 22204 && user_id.trim_end_matches('\0') == "laszip encoded" {
-            let items = laz::LazVlr::read_from(vlr.data.as_slice()).map(|v| v.items().len());
-            if let Ok(0) | Err(_) = items {
-                return Err(CloudIoError::Las {
-                    path: path.to_owned(),
-                    source: Box::new(las::Error::Io(std::io::Error::new(
-                        std::io::ErrorKind::InvalidData,
-                        "its laszip record describes no point item (corrupt LAZ)",
-                    ))),
-                });
-            }
-            return Ok(());
+            return match laz::LazVlr::read_from(vlr.data.as_slice()) {
+                Ok(laszip) if !laszip.items().is_empty() => Ok(Some(laszip)),
+                _ => Err(invalid(
+                    path,
+                    "its laszip record describes no point item (corrupt LAZ)".into(),
+                )),
+            };
         }
+    }
+    Ok(None)
+}
+
+/// The most bytes a LAZ chunk may decompress to: the `laz` crate sizes its buffers
+/// from the chunk's point count (the laszip record's `chunk_size`, or the chunk
+/// table's counts) before it decodes anything. LASzip writes 50 000 points a chunk
+/// (about 1.7 MB of format-2 points); a chunk may hold at most 64 MiB, or 256 times
+/// the file's size (LAZ compresses points 5 to 15 times), whichever is larger.
+fn laz_chunk_budget(file_bytes: u64) -> u64 {
+    (64u64 << 20).max(file_bytes.saturating_mul(256))
+}
+
+/// Refuse a LAZ file whose chunks announce more points than [`laz_chunk_budget`]
+/// allows, or more compressed bytes than the file holds: the `laz` crate would
+/// allocate them before reading (111 GB for a 500-point file whose `chunk_size` was
+/// set to 2³² − 16). Reads the chunk table as `laz` does.
+fn check_laz_chunks(
+    path: &Path,
+    laszip: &laz::LazVlr,
+    data_start: u64,
+    file_bytes: u64,
+) -> Result<(), CloudIoError> {
+    use std::io::{Seek, SeekFrom};
+    let io_error = |source| CloudIoError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(io_error)?);
+    file.seek(SeekFrom::Start(data_start)).map_err(io_error)?;
+    let Ok(table) = laz::laszip::ChunkTable::read_from(&mut file, laszip) else {
+        return Ok(()); // no chunk table, or a truncated one: `laz` reports it
+    };
+    let point_bytes = laszip.items_size().max(1);
+    let budget = laz_chunk_budget(file_bytes);
+    let mut compressed = 0u64;
+    for (k, entry) in table.as_ref().iter().enumerate() {
+        let decoded = entry.point_count.saturating_mul(point_bytes);
+        if decoded > budget {
+            return Err(invalid(
+                path,
+                format!(
+                    "its chunk {k} announces {} points of {point_bytes} bytes, more than a \
+                     chunk of a {file_bytes}-byte file may hold ({budget} bytes; corrupt LAZ)",
+                    entry.point_count
+                ),
+            ));
+        }
+        compressed = compressed.saturating_add(entry.byte_count);
+    }
+    if compressed > file_bytes {
+        return Err(CloudIoError::Truncated {
+            path: path.to_owned(),
+            announced: None,
+            found: format!(
+                "chunks of {compressed} compressed bytes in {file_bytes} bytes (corrupt LAZ)"
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Refuse a LAS 1.4 file whose first extended record (the one `las` reads with the
+/// header) reaches beyond the file's end: `las` would allocate the length it
+/// announces (a 64-bit count) before reading it.
+fn check_evlr(path: &Path, raw: &las::raw::Header, file_bytes: u64) -> Result<(), CloudIoError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let Some(evlr) = raw.evlr else {
+        return Ok(());
+    };
+    let io_error = |source| CloudIoError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    // The record's header: reserved (2), user id (16), record id (2), the length (8),
+    // a description (32).
+    const HEADER_BYTES: u64 = 60;
+    let mut file = std::fs::File::open(path).map_err(io_error)?;
+    let mut head = [0u8; HEADER_BYTES as usize];
+    if file.seek(SeekFrom::Start(evlr.start_of_first_evlr)).is_err()
+        || file.read_exact(&mut head).is_err()
+    {
+        return Ok(()); // beyond the file: `las` reports it
+    }
+    let length = u64::from_le_bytes(head[20..28].try_into().expect("8 bytes"));
+    let end = evlr
+        .start_of_first_evlr
+        .saturating_add(HEADER_BYTES)
+        .saturating_add(length);
+    if end > file_bytes {
+        return Err(CloudIoError::Truncated {
+            path: path.to_owned(),
+            announced: None,
+            found: format!(
+                "an extended record of {length} bytes at byte {} of a {file_bytes}-byte file",
+                evlr.start_of_first_evlr
+            ),
+        });
     }
     Ok(())
 }
@@ -296,9 +394,14 @@ pub(crate) fn read(path: &Path) -> Result<(Points, LasInfo), CloudIoError> {
             ),
         ));
     }
+    check_evlr(path, &raw, file_bytes)?;
     if raw.point_data_record_format & 0x80 != 0 {
-        check_laz_items(path, &raw)?;
-        check_laz_chunk_table(path, u64::from(raw.offset_to_point_data), file_bytes)?;
+        let laszip = check_laz_items(path, &raw)?;
+        let data_start = u64::from(raw.offset_to_point_data);
+        check_laz_chunk_table(path, data_start, file_bytes)?;
+        if let Some(laszip) = &laszip {
+            check_laz_chunks(path, laszip, data_start, file_bytes)?;
+        }
     }
     // The `laz` decoder asserts (panics) on some corrupt inputs instead of reporting
     // them (an empty item list, an arithmetic-coder symbol out of range: found by our

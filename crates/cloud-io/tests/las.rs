@@ -260,3 +260,102 @@ fn laz_chunk_tables_that_lie_are_refused() {
     assert!(message.contains("4294967295 chunks"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The offset in `bytes` (a LAS/LAZ file) of the payload of the variable-length record
+/// `record_id`.
+fn vlr_payload(bytes: &[u8], record_id: u16) -> usize {
+    let header_size = usize::from(u16::from_le_bytes(bytes[94..96].try_into().unwrap()));
+    let count = u32::from_le_bytes(bytes[100..104].try_into().unwrap());
+    let mut at = header_size;
+    for _ in 0..count {
+        let id = u16::from_le_bytes(bytes[at + 18..at + 20].try_into().unwrap());
+        let length = usize::from(u16::from_le_bytes(bytes[at + 20..at + 22].try_into().unwrap()));
+        if id == record_id {
+            return at + 54;
+        }
+        at += 54 + length;
+    }
+    panic!("no record {record_id}");
+}
+
+/// A LAZ whose laszip record announces chunks of 2³² − 16 points (the `laz` crate
+/// would size its buffer from that: 111 GB for these 500 points, and the process
+/// would abort) is refused before decoding, with the chunk's announced size; a chunk
+/// size within the budget still reads.
+#[test]
+fn laz_chunks_larger_than_the_file_could_hold_are_refused() {
+    let dir = temp_dir("chunk-size");
+    let positions: Vec<DVec3> = (0..500)
+        .map(|i| DVec3::new(f64::from(i) * 0.01, 0.0, 1.0))
+        .collect();
+    let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 500], None, Some(0.01))
+        .unwrap();
+    let path = dir.join("c.laz");
+    write_cloud(&cloud, &path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    // The laszip record: compressor, coder (2 bytes each), version (4), options (4),
+    // then the chunk size (4).
+    let chunk_size = vlr_payload(&bytes, 22204) + 12;
+    for (points, refused) in [(0xFFFF_FFF0u32, true), (100_000, false)] {
+        let mut lying = bytes.clone();
+        lying[chunk_size..chunk_size + 4].copy_from_slice(&points.to_le_bytes());
+        std::fs::write(&path, &lying).unwrap();
+        match read_las(&path) {
+            Err(e) if refused => {
+                let message = e.to_string();
+                assert!(
+                    message.contains(&format!("announces {points} points")),
+                    "{message}"
+                );
+            }
+            Ok((back, _, _)) if !refused => assert_eq!(back.len(), 500),
+            other => panic!("chunk size {points}: {:?}", other.map(|c| c.0.len())),
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A LAS 1.4 file whose extended record announces 2⁴⁰ bytes (`las` would allocate
+/// them, 1 TiB, before reading) is refused as truncated; the same file with its true
+/// length reads.
+#[test]
+fn las_extended_records_longer_than_the_file_are_refused() {
+    let dir = temp_dir("evlr");
+    let path = dir.join("c.las");
+    let mut builder = las::Builder::from((1, 4));
+    builder.evlrs.push(las::Vlr {
+        user_id: "pgm-test".into(),
+        record_id: 1,
+        description: "an extended record".into(),
+        data: vec![7; 100],
+    });
+    let header = builder.into_header().unwrap();
+    let mut writer = las::Writer::from_path(&path, header).unwrap();
+    for i in 0..10 {
+        let point = las::Point {
+            x: f64::from(i),
+            y: 0.0,
+            z: 1.0,
+            ..Default::default()
+        };
+        writer.write_point(point).unwrap();
+    }
+    writer.close().unwrap();
+    let (back, _, _) = read_las(&path).unwrap();
+    assert_eq!(back.len(), 10);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let start = u64::from_le_bytes(bytes[235..243].try_into().unwrap()) as usize;
+    assert_eq!(
+        u64::from_le_bytes(bytes[start + 20..start + 28].try_into().unwrap()),
+        100
+    );
+    bytes[start + 20..start + 28].copy_from_slice(&(1u64 << 40).to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    match read_las(&path) {
+        Err(CloudIoError::Truncated { found, .. }) => {
+            assert!(found.contains("1099511627776 bytes"), "{found}");
+        }
+        other => panic!("{:?}", other.map(|c| c.0.len())),
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
