@@ -166,7 +166,9 @@ fn check_evlr(path: &Path, raw: &las::raw::Header, file_bytes: u64) -> Result<()
     const HEADER_BYTES: u64 = 60;
     let mut file = std::fs::File::open(path).map_err(io_error)?;
     let mut head = [0u8; HEADER_BYTES as usize];
-    if file.seek(SeekFrom::Start(evlr.start_of_first_evlr)).is_err()
+    if file
+        .seek(SeekFrom::Start(evlr.start_of_first_evlr))
+        .is_err()
         || file.read_exact(&mut head).is_err()
     {
         return Ok(()); // beyond the file: `las` reports it

@@ -269,7 +269,9 @@ fn vlr_payload(bytes: &[u8], record_id: u16) -> usize {
     let mut at = header_size;
     for _ in 0..count {
         let id = u16::from_le_bytes(bytes[at + 18..at + 20].try_into().unwrap());
-        let length = usize::from(u16::from_le_bytes(bytes[at + 20..at + 22].try_into().unwrap()));
+        let length = usize::from(u16::from_le_bytes(
+            bytes[at + 20..at + 22].try_into().unwrap(),
+        ));
         if id == record_id {
             return at + 54;
         }

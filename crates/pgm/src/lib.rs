@@ -8,4 +8,4 @@ mod simd;
 mod transform;
 
 pub use error::PgmError;
-pub use transform::{LAMBDA_RANGE, Pgm, PgmJacobian, PgmOptions};
+pub use transform::{LAMBDA_RANGE, MAX_KERNEL_RADIUS_LAMBDAS, Pgm, PgmJacobian, PgmOptions};

@@ -12,6 +12,9 @@ use crate::recursive::{self, Mode, Recursive, Scratch, Shape, Window};
 /// Supported Gaussian extents, pixels.
 pub const LAMBDA_RANGE: std::ops::RangeInclusive<f32> = 0.5..=40.0;
 
+/// The widest truncated kernel accepted, in λ ([`PgmOptions::kernel_radius_lambdas`]).
+pub const MAX_KERNEL_RADIUS_LAMBDAS: f32 = 64.0;
+
 /// Which interaction matrix `L_G` to compute (`../shared/notes/math.md`): the one
 /// Jacobian setting of the project (the optimiser's, the protocols'). Written by its
 /// [`PgmJacobian::name`] in files (`"convolved"`, `"paper"`, `"paper-margin3"`).
@@ -99,8 +102,8 @@ impl From<PgmJacobian> for String {
 /// Options of the transform.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PgmOptions {
-    /// Kernel radius in units of λ (rounded up to whole pixels). Default 4: the
-    /// truncated tail weighs `exp(−8) ≈ 3.4e−4` of the peak.
+    /// Kernel radius in units of λ (rounded up to whole pixels), in `[1, 64]`. Default
+    /// 4: the truncated tail weighs `exp(−8) ≈ 3.4e−4` of the peak.
     pub kernel_radius_lambdas: f32,
     /// Sample every `stride`-th pixel in both directions (1: every pixel). The values
     /// (and `J_λ`, `L_G`) at the kept samples are exactly those of the full grid (the
@@ -309,10 +312,15 @@ impl Pgm {
     /// sharing its tables: [`Brightness::sharing_tables`]), whose normalisation is set
     /// to `options.normalize`.
     pub fn from_brightness(brightness: Brightness, options: PgmOptions) -> Result<Self, PgmError> {
-        if !(options.kernel_radius_lambdas >= 1.0 && options.kernel_radius_lambdas.is_finite()) {
+        // At most MAX_KERNEL_RADIUS_LAMBDAS: the kernels are allocated from it (a
+        // Gaussian is below 1e-300 of its peak by 38 standard deviations).
+        if !(1.0..=MAX_KERNEL_RADIUS_LAMBDAS).contains(&options.kernel_radius_lambdas) {
             return Err(PgmError::Option {
                 name: "kernel_radius_lambdas",
-                message: format!("must be >= 1, got {}", options.kernel_radius_lambdas),
+                message: format!(
+                    "must be in [1, {MAX_KERNEL_RADIUS_LAMBDAS}], got {}",
+                    options.kernel_radius_lambdas
+                ),
             });
         }
         let l = options.recursive_from_lambda;

@@ -254,16 +254,20 @@ fn bad_lambda_and_options_are_errors() {
         )
         .is_err()
     );
-    assert!(
-        Pgm::new(
-            &camera,
-            PgmOptions {
-                kernel_radius_lambdas: 0.0,
-                ..PgmOptions::default()
-            }
-        )
-        .is_err()
-    );
+    // Kernels are allocated from the radius: bounded (1e12 λ would be terabytes).
+    for radius in [0.0, f32::NAN, 1e12, 64.5] {
+        assert!(
+            Pgm::new(
+                &camera,
+                PgmOptions {
+                    kernel_radius_lambdas: radius,
+                    ..PgmOptions::default()
+                }
+            )
+            .is_err(),
+            "{radius}"
+        );
+    }
     let wrong = Frame::new(10, 10);
     assert!(matches!(
         pgm.compute(&wrong, 2.0, PgmJacobian::Convolved),

@@ -77,6 +77,18 @@ fn config_round_trips_through_toml_and_rejects_bad_values() {
             "step1_max_iterations = 2\nlambda_schedule = [7.5, 3.0]",
             "step1_max_iterations",
         ),
+        // A search keeps lists of these many candidates: bounded, not only non-zero.
+        ("[global]\nrefined = 1000000000000000", "global.refined"),
+        (
+            "[global]\nscreened = 9223372036854775807",
+            "global.screened",
+        ),
+        ("[global]\npruned_to = 1000001", "global.pruned_to"),
+        ("[global]\nscreened = 0", "global.screened"),
+        (
+            "[global]\ndescent_iterations = 100001",
+            "global.descent_iterations",
+        ),
     ] {
         match VvsConfig::from_toml_str(text) {
             Err(VvsError::Config { name, .. }) => assert_eq!(name, field),

@@ -220,14 +220,20 @@ impl GlobalConfig {
                 format!("must be in [0.1, 1000] m, got {}", self.search_cell_size_m),
             );
         }
-        for (name, v) in [
-            ("global.screened", self.screened),
-            ("global.descent_iterations", self.descent_iterations),
-            ("global.refined", self.refined),
-            ("global.pruned_to", self.pruned_to),
+        // Counts of candidates at most MAX_CANDIDATES (a search keeps lists of them), of
+        // iterations at most the servo's cap.
+        for (name, v, cap) in [
+            ("global.screened", self.screened, MAX_CANDIDATES),
+            (
+                "global.descent_iterations",
+                self.descent_iterations,
+                crate::config::MAX_ITERATIONS,
+            ),
+            ("global.refined", self.refined, MAX_CANDIDATES),
+            ("global.pruned_to", self.pruned_to, MAX_CANDIDATES),
         ] {
-            if v == 0 {
-                return bad(name, "must be >= 1".into());
+            if !(1..=cap).contains(&v) {
+                return bad(name, format!("must be in 1..={cap}, got {v}"));
             }
         }
         if self.prune_after_iterations >= self.descent_iterations && self.prune_after_iterations > 0
