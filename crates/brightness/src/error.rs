@@ -16,6 +16,10 @@ pub enum BrightnessError {
         /// Camera height.
         height: u32,
     },
+    /// A picture whose buffers do not hold a value per pixel
+    /// ([`frame::AnyImage::check_buffers`]).
+    #[error("the picture: {0}")]
+    Picture(#[from] frame::FrameError),
     /// Buffers of different lengths.
     #[error("{what}: length {got}, expected {expected}")]
     Length {

@@ -252,6 +252,8 @@ impl Brightness {
                 height: self.tables.height as u32,
             });
         }
+        // Every buffer a value per pixel (the pictures' buffers are public fields).
+        picture.check_buffers()?;
         // Compiled for the widest instruction set found at run time, so that the plain
         // loops below are vectorised with it (the same operations: the same bits).
         isa::arch().dispatch(Pixels {
@@ -410,7 +412,7 @@ impl Brightness {
         if ranges {
             picture
                 .inverse_range(&mut self.inverse_range)
-                .expect("picture size checked above");
+                .expect("picture size and buffers checked above");
         }
         // The image is zero outside the valid pixels from the start and never written
         // there; the inverse ranges are zeroed between the valid runs.

@@ -209,6 +209,12 @@ impl AnyImage for Frame {
         self.width
     }
 
+    fn check_buffers(&self) -> Result<(), FrameError> {
+        crate::check_length("intensity", self.intensity.len(), self)?;
+        crate::check_length("range_m", self.range_m.len(), self)?;
+        crate::check_length("status", self.status.len(), self)
+    }
+
     fn height(&self) -> u32 {
         self.height
     }

@@ -281,6 +281,11 @@ impl AnyImage for Image {
         self.width
     }
 
+    fn check_buffers(&self) -> Result<(), FrameError> {
+        crate::check_length("intensity", self.intensity.len(), self)?;
+        crate::check_length("valid", self.valid.len(), self)
+    }
+
     fn height(&self) -> u32 {
         self.height
     }

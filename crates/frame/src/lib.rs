@@ -64,10 +64,20 @@ pub trait AnyImage {
     where
         Self: Sized;
 
-    /// [`FrameError::Size`] unless the picture has `camera`'s size.
+    /// [`FrameError::Length`] unless every per-pixel buffer of the picture holds one
+    /// value per pixel (its buffers are public fields, which a caller may have
+    /// resized): what a feature checks before it reads them. The default checks the
+    /// intensities; the pictures of this crate check each of their buffers.
+    fn check_buffers(&self) -> Result<(), FrameError> {
+        check_length("intensity", self.intensity().len(), self)
+    }
+
+    /// [`FrameError::Size`] unless the picture has `camera`'s size, and
+    /// [`FrameError::Length`] unless its buffers hold a value per pixel
+    /// ([`AnyImage::check_buffers`]).
     fn check_size(&self, what: &'static str, camera: &ucm::Camera) -> Result<(), FrameError> {
         if self.width() == camera.width() && self.height() == camera.height() {
-            Ok(())
+            self.check_buffers()
         } else {
             Err(FrameError::Size {
                 what,
@@ -100,4 +110,23 @@ fn downsampled_size(
         });
     }
     Ok((width, height))
+}
+
+/// [`FrameError::Length`] unless a buffer of `got` values holds one per pixel of
+/// `picture`.
+fn check_length(
+    what: &'static str,
+    got: usize,
+    picture: &(impl AnyImage + ?Sized),
+) -> Result<(), FrameError> {
+    let expected = picture.width() as usize * picture.height() as usize;
+    if got == expected {
+        Ok(())
+    } else {
+        Err(FrameError::Length {
+            what,
+            got,
+            expected,
+        })
+    }
 }

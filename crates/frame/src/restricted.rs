@@ -52,6 +52,11 @@ impl<P: AnyImage> AnyImage for Restricted<'_, P> {
         self.picture.intensity()
     }
 
+    fn check_buffers(&self) -> Result<(), FrameError> {
+        self.picture.check_buffers()?;
+        crate::check_length("support", self.support.len(), self)
+    }
+
     #[inline]
     fn is_observed(&self, index: usize) -> bool {
         self.support[index] && self.picture.is_observed(index)

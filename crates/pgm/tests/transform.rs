@@ -273,6 +273,19 @@ fn bad_lambda_and_options_are_errors() {
         pgm.compute(&wrong, 2.0, PgmJacobian::Convolved),
         Err(PgmError::Brightness(_))
     ));
+    // A picture of the right size whose buffers a caller shortened (public fields).
+    let mut shortened = frame::Image::new(camera.width(), camera.height());
+    shortened.valid.truncate(5);
+    assert!(matches!(
+        pgm.compute(&shortened, 2.0, PgmJacobian::Convolved),
+        Err(PgmError::Brightness(brightness::BrightnessError::Picture(
+            frame::FrameError::Length {
+                what: "valid",
+                got: 5,
+                ..
+            }
+        )))
+    ));
 }
 
 #[test]

@@ -310,6 +310,24 @@ impl Fusion {
             (color.width(), color.height()),
             &self.sensor.color_camera,
         )?;
+        // A value per pixel (the buffers are public fields, which a caller may resize).
+        for (what, got, pixels) in [
+            (
+                "depth_m",
+                depth.depth_m.len(),
+                (depth.width(), depth.height()),
+            ),
+            ("rgb", color.rgb.len(), (color.width(), color.height())),
+        ] {
+            let expected = pixels.0 as usize * pixels.1 as usize;
+            if got != expected {
+                return Err(RgbdError::Length {
+                    what,
+                    got,
+                    expected,
+                });
+            }
+        }
         check_pose("world_from_depth", world_from_depth)?;
         let mut stats = FrameStats::default();
         let (w, h) = (depth.width() as usize, depth.height() as usize);

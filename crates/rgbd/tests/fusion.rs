@@ -315,6 +315,27 @@ fn bad_frames_and_settings_are_typed_errors() {
         DepthImage::from_metres(3, 3, vec![1.0; 8]),
         Err(RgbdError::Length { .. })
     ));
+    // Buffers a caller shortened (public fields): typed errors, not panics.
+    let mut short_depth = depth.clone();
+    short_depth.depth_m.truncate(7);
+    assert!(matches!(
+        fusion.add(&short_depth, &color, &pose),
+        Err(RgbdError::Length {
+            what: "depth_m",
+            got: 7,
+            ..
+        })
+    ));
+    let mut short_color = color.clone();
+    short_color.rgb.truncate(7);
+    assert!(matches!(
+        fusion.add(&depth, &short_color, &pose),
+        Err(RgbdError::Length {
+            what: "rgb",
+            got: 7,
+            ..
+        })
+    ));
     // Nothing fused: no cloud.
     assert!(matches!(fusion.cloud(), Err(RgbdError::Empty { .. })));
     for options in [

@@ -128,6 +128,22 @@ fn invalid_input_is_a_typed_error() {
         servo.localize_in_box(&Frame::new(4, 4), desired_pose(), &paper_box),
         Err(VvsError::DesiredSize { .. })
     ));
+    // Buffers a caller shortened (they are public fields): typed errors, not panics.
+    for what in ["intensity", "range_m", "status"] {
+        let mut shortened = desired.clone();
+        match what {
+            "intensity" => shortened.intensity.truncate(10),
+            "range_m" => shortened.range_m.truncate(10),
+            _ => shortened.status.truncate(10),
+        }
+        let expected = |e: Option<VvsError>| matches!(e, Some(VvsError::Frame(frame::FrameError::Length { what: w, got: 10, .. })) if w == what);
+        let run = servo.run(Method::Rule2, &shortened, desired_pose()).err();
+        assert!(expected(run), "{what}");
+        let search = servo
+            .localize_in_box(&shortened, desired_pose(), &paper_box)
+            .err();
+        assert!(expected(search), "{what}");
+    }
     let lying_box = vvs::PriorBox {
         translation_m: [f64::INFINITY, 0.0, 0.0],
         rotation_deg: [0.0; 3],

@@ -192,6 +192,7 @@ impl<'a> Servo<'a> {
                 height: self.camera.height(),
             });
         }
+        desired.check_buffers()?;
         if !initial.is_finite() {
             return Err(VvsError::NonFinitePose);
         }
