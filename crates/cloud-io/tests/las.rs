@@ -237,12 +237,8 @@ fn lying_headers_are_refused_or_ignored() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A LAZ whose chunk table announces 2³² − 1 chunks (our fuzzing's find: the `laz`
-/// crate allocated the table from that count, 25 GB, and the process aborted) is
-/// refused from the file's size.
-#[test]
-fn laz_chunk_tables_that_lie_are_refused() {
-    let dir = temp_dir("chunks");
+/// A LAZ file `c.laz` in `dir` of 500 points along a line, 1 cm apart.
+fn five_hundred_point_laz(dir: &std::path::Path) -> std::path::PathBuf {
     let positions: Vec<DVec3> = (0..500)
         .map(|i| DVec3::new(f64::from(i) * 0.01, 0.0, 1.0))
         .collect();
@@ -250,6 +246,16 @@ fn laz_chunk_tables_that_lie_are_refused() {
         .unwrap();
     let path = dir.join("c.laz");
     write_cloud(&cloud, &path).unwrap();
+    path
+}
+
+/// A LAZ whose chunk table announces 2³² − 1 chunks (our fuzzing's find: the `laz`
+/// crate allocated the table from that count, 25 GB, and the process aborted) is
+/// refused from the file's size.
+#[test]
+fn laz_chunk_tables_that_lie_are_refused() {
+    let dir = temp_dir("chunks");
+    let path = five_hundred_point_laz(&dir);
     let mut bytes = std::fs::read(&path).unwrap();
     // The chunk table's offset is the first 8 bytes of the point data (offset at 96).
     let data = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;
@@ -287,13 +293,7 @@ fn vlr_payload(bytes: &[u8], record_id: u16) -> usize {
 #[test]
 fn laz_chunks_larger_than_the_file_could_hold_are_refused() {
     let dir = temp_dir("chunk-size");
-    let positions: Vec<DVec3> = (0..500)
-        .map(|i| DVec3::new(f64::from(i) * 0.01, 0.0, 1.0))
-        .collect();
-    let cloud = PointCloud::from_points(DVec3::ZERO, &positions, &vec![0.5; 500], None, Some(0.01))
-        .unwrap();
-    let path = dir.join("c.laz");
-    write_cloud(&cloud, &path).unwrap();
+    let path = five_hundred_point_laz(&dir);
     let bytes = std::fs::read(&path).unwrap();
     // The laszip record: compressor, coder (2 bytes each), version (4), options (4),
     // then the chunk size (4).
