@@ -41,7 +41,9 @@ fn two_threads() -> rayon::ThreadPool {
 fn picture(city: &City, camera: &Camera, truth: &Isometry3) -> frame::Image {
     let mut servo = Servo::new(&city.cloud, camera, one_thread()).unwrap();
     let rendered = servo.render(truth).unwrap();
-    Acquisition::default().acquire(&rendered, camera, 0, 0.0)
+    Acquisition::default()
+        .acquire(&rendered, camera, 0, 0.0)
+        .unwrap()
 }
 
 fn goal_localization(c: &mut Criterion) {

@@ -537,12 +537,9 @@ fn rendering_only_when_the_image_moves_ends_at_the_same_place_with_fewer_renderi
     // A picture as the camera takes it.
     let camera = fixture();
     let mut servo = Servo::new(&city().cloud, &camera, every.clone()).unwrap();
-    let picture = world::Acquisition::default().acquire(
-        &servo.render(&desired_pose()).unwrap(),
-        &camera,
-        0,
-        0.0,
-    );
+    let picture = world::Acquisition::default()
+        .acquire(&servo.render(&desired_pose()).unwrap(), &camera, 0, 0.0)
+        .unwrap();
     let start = offset([0.3, -0.3, 0.26, 0.05, -0.04, 0.05]);
     let a = servo.run(Method::Rule2, &picture, start).unwrap();
     let b = Servo::new(&city().cloud, &camera, warped)

@@ -40,7 +40,9 @@ fn localizes_a_png_in_a_laz_cloud_from_metres_away() {
     let truth = camera_looking_down(DVec3::new(-12.0, 0.5, 3.0), 0.0);
     let mut servo = vvs::Servo::new(&resampled.cloud, &camera, Default::default()).unwrap();
     let rendered = servo.render(&truth).unwrap();
-    let picture = Acquisition::default().acquire(&rendered, &camera, 0, 0.0);
+    let picture = Acquisition::default()
+        .acquire(&rendered, &camera, 0, 0.0)
+        .unwrap();
     let picture_path = dir.join("picture.png");
     picture.save_png16(&picture_path).unwrap();
     let camera_path = root().join("fixtures/omni-320x240.toml");

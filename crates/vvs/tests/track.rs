@@ -36,7 +36,9 @@ fn measured_pictures(camera: &ucm::Camera, truth: &[Isometry3]) -> Vec<Image> {
         .enumerate()
         .map(|(k, pose)| {
             let rendered = servo.render(pose).unwrap();
-            acquisition.acquire(&rendered, camera, k, k as f64 / 30.0)
+            acquisition
+                .acquire(&rendered, camera, k, k as f64 / 30.0)
+                .unwrap()
         })
         .collect()
 }

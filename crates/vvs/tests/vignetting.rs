@@ -102,7 +102,7 @@ fn estimates_the_vignetting_with_the_pose() {
         noise_sigma: 0.0,
         ..Acquisition::default()
     };
-    let picture = acquisition.acquire(&rendered, &camera, 0, 0.0);
+    let picture = acquisition.acquire(&rendered, &camera, 0, 0.0).unwrap();
     let start =
         desired_pose() * Isometry3::from_pose_vector([1.0, 0.3, 0.1, 0.0, 0.0, 0.05]).unwrap();
     let outcome = servo.run(Method::Rule2, &picture, start).unwrap();

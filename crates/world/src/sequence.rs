@@ -32,7 +32,7 @@
 //! clamping to `[0, 1]`. Every random draw is seeded: the same file gives the same
 //! images.
 
-use frame::{Frame, Image};
+use frame::{AnyImage, Frame, Image};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use splat::rng::SplitMix64;
@@ -421,8 +421,24 @@ impl Acquisition {
     /// The picture a camera would acquire where `rendered` was rendered, for frame
     /// `index` at time `time_s`: every pixel of the camera's valid region is a
     /// measurement (the sky included, as a real camera sees it), degraded as the module
-    /// documentation says.
-    pub fn acquire(&self, rendered: &Frame, camera: &Camera, index: usize, time_s: f64) -> Image {
+    /// documentation says. Fails on settings [`Acquisition::validate`] refuses, and on a
+    /// rendering that is not of `camera`'s size (or whose buffers are not).
+    pub fn acquire(
+        &self,
+        rendered: &Frame,
+        camera: &Camera,
+        index: usize,
+        time_s: f64,
+    ) -> Result<Image, WorldError> {
+        self.validate()?;
+        rendered
+            .check_size("rendering to acquire", camera)
+            .map_err(|e| WorldError::Sequence(e.to_string()))?;
+        if !time_s.is_finite() {
+            return Err(WorldError::Sequence(format!(
+                "acquisition time must be finite, got {time_s}"
+            )));
+        }
         let (w, h) = (rendered.width() as usize, rendered.height() as usize);
         let valid = camera.valid_pixels();
         let mut intensity = rendered.intensity.clone();
@@ -466,7 +482,7 @@ impl Acquisition {
             intensity,
             valid.to_vec(),
         )
-        .expect("a frame of the camera's size")
+        .map_err(|e| WorldError::Sequence(e.to_string()))
     }
 }
 

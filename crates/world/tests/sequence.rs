@@ -210,15 +210,15 @@ fn acquisition_degrades_like_a_camera() {
         noise_sigma: 0.03,
         ..Acquisition::default()
     };
-    let a = noise_only.acquire(&flat, &camera, 0, 0.0);
+    let a = noise_only.acquire(&flat, &camera, 0, 0.0).unwrap();
     let (mean, std) = stats(&a);
     assert!(
         (mean - 0.5).abs() < 0.002 && (std - 0.03).abs() < 0.002,
         "{mean} {std}"
     );
-    let again = noise_only.acquire(&flat, &camera, 0, 0.0);
+    let again = noise_only.acquire(&flat, &camera, 0, 0.0).unwrap();
     assert_eq!(a, again, "seeded noise");
-    let other = noise_only.acquire(&flat, &camera, 1, 0.0);
+    let other = noise_only.acquire(&flat, &camera, 1, 0.0).unwrap();
     assert_ne!(a, other, "frames get independent noise");
     // Gain at a quarter period: 1 + amplitude; offset cos = 0.
     let gain_only = Acquisition {
@@ -227,7 +227,9 @@ fn acquisition_degrades_like_a_camera() {
         noise_sigma: 0.0,
         ..Acquisition::default()
     };
-    let g = gain_only.acquire(&flat, &camera, 0, gain_only.gain_period_s / 4.0);
+    let g = gain_only
+        .acquire(&flat, &camera, 0, gain_only.gain_period_s / 4.0)
+        .unwrap();
     let (mean, _) = stats(&g);
     assert!(
         (mean - 0.5 * (1.0 + gain_only.gain_amplitude)).abs() < 1e-4,
@@ -240,7 +242,7 @@ fn acquisition_degrades_like_a_camera() {
         noise_sigma: 0.0,
         ..Acquisition::default()
     };
-    let v = vignette_only.acquire(&flat, &camera, 0, 0.0);
+    let v = vignette_only.acquire(&flat, &camera, 0, 0.0).unwrap();
     let (inner, outer) = valid.iter().fold((0.0f32, 1.0f32), |(hi, lo), &i| {
         (hi.max(v.intensity[i]), lo.min(v.intensity[i]))
     });
@@ -255,4 +257,30 @@ fn acquisition_degrades_like_a_camera() {
             .all(|i| !v.valid[i] && v.intensity[i] == 0.0)
     );
     assert_eq!(v.valid_count(), valid.len());
+    // A rendering of another size, a shortened buffer, settings `validate` refuses (a
+    // blur of 1e12 pixels would allocate terabytes) and a time that is not finite are
+    // errors, not panics.
+    let small = Frame::new(4, 4);
+    assert!(
+        Acquisition::default()
+            .acquire(&small, &camera, 0, 0.0)
+            .is_err()
+    );
+    let mut shortened = flat.clone();
+    shortened.intensity.truncate(10);
+    assert!(
+        Acquisition::default()
+            .acquire(&shortened, &camera, 0, 0.0)
+            .is_err()
+    );
+    let wide_blur = Acquisition {
+        blur_sigma_px: 1e12,
+        ..Acquisition::default()
+    };
+    assert!(wide_blur.acquire(&flat, &camera, 0, 0.0).is_err());
+    assert!(
+        Acquisition::default()
+            .acquire(&flat, &camera, 0, f64::NAN)
+            .is_err()
+    );
 }

@@ -664,7 +664,7 @@ fn main() -> anyhow::Result<()> {
             );
             if acquire {
                 world::Acquisition::default()
-                    .acquire(&frame, &camera, 0, 0.0)
+                    .acquire(&frame, &camera, 0, 0.0)?
                     .save_png(&out)?;
             } else {
                 frame.save_png(&out)?;

@@ -34,7 +34,7 @@ pub fn acquire(
             camera,
             k,
             trajectory.time_s(k),
-        )));
+        )?));
     }
     Ok(frames)
 }
