@@ -167,9 +167,13 @@ impl ColorImage {
     }
 
     /// The colour at `(u, v)` (pixel centres at integers), bilinear between the four
-    /// nearest pixels, as `f32` in `[0, 255]`; `None` outside the picture.
+    /// nearest pixels, as `f32` in `[0, 255]`; `None` outside the picture, and for an
+    /// empty picture or one whose `rgb` does not hold a colour per pixel.
     pub fn bilinear(&self, u: f32, v: f32) -> Option<[f32; 3]> {
         let (w, h) = (self.width as usize, self.height as usize);
+        if w == 0 || h == 0 || self.rgb.len() != w * h {
+            return None;
+        }
         if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f32 && v <= (h - 1) as f32) {
             return None;
         }

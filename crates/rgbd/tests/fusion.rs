@@ -336,6 +336,12 @@ fn bad_frames_and_settings_are_typed_errors() {
             ..
         })
     ));
+    // Sampling an empty or shortened colour picture finds no colour (it indexed out of
+    // bounds).
+    assert_eq!(short_color.bilinear(1.0, 1.0), None);
+    let empty = rgbd::ColorImage::from_rgb(0, 0, Vec::new()).unwrap();
+    assert_eq!(empty.bilinear(0.0, 0.0), None);
+    assert!(color.bilinear(1.0, 1.0).is_some());
     // Nothing fused: no cloud.
     assert!(matches!(fusion.cloud(), Err(RgbdError::Empty { .. })));
     for options in [
