@@ -84,13 +84,21 @@ impl Mask {
     }
 
     /// Read a mask image: any pixel whose (luma) value is above half the range is valid.
+    /// Its size is checked against [`crate::MAX_PIXELS`] before it is decoded.
     pub fn from_image_file(path: &Path) -> Result<Self, UcmError> {
-        let image = image::open(path)
-            .map_err(|source| UcmError::MaskImage {
-                path: path.to_owned(),
-                source,
-            })?
-            .into_luma8();
+        let error = |source| UcmError::MaskImage {
+            path: path.to_owned(),
+            source,
+        };
+        let reader = image::ImageReader::open(path)
+            .map_err(|e| error(image::ImageError::IoError(e)))?
+            .with_guessed_format()
+            .map_err(|e| error(image::ImageError::IoError(e)))?;
+        let (width, height) = reader.into_dimensions().map_err(error)?;
+        if u64::from(width) * u64::from(height) > crate::MAX_PIXELS {
+            return Err(UcmError::TooManyPixels { width, height });
+        }
+        let image = image::open(path).map_err(error)?.into_luma8();
         let (width, height) = image.dimensions();
         let valid = image.pixels().map(|p| p.0[0] >= 128).collect();
         Ok(Self {

@@ -181,7 +181,42 @@ fn toml_round_trip_with_distortion_skew_and_mask() {
     assert!(dir.join("masked.mask.png").exists());
     // In memory, a mask has no path to write.
     assert!(masked.to_toml_string().is_err());
+    // A mask picture whose header announces 100 000 × 100 000 pixels is refused from
+    // its header, before it is decoded.
+    let png = dir.join("masked.mask.png");
+    let mut bytes = std::fs::read(&png).unwrap();
+    // The IHDR chunk: length (4), type (4), width (4), height (4), ..., its CRC after
+    // its 13 bytes of data.
+    assert_eq!(&bytes[12..16], b"IHDR");
+    bytes[16..20].copy_from_slice(&100_000u32.to_be_bytes());
+    bytes[20..24].copy_from_slice(&100_000u32.to_be_bytes());
+    let crc = crc32(&bytes[12..29]);
+    bytes[29..33].copy_from_slice(&crc.to_be_bytes());
+    std::fs::write(&png, &bytes).unwrap();
+    assert!(matches!(
+        Mask::from_image_file(&png),
+        Err(UcmError::TooManyPixels {
+            width: 100_000,
+            height: 100_000
+        })
+    ));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The CRC-32 of PNG chunks (ISO 3309), bit by bit.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = u32::MAX;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
 }
 
 #[test]
