@@ -174,31 +174,16 @@ fn refuses_huge_announced_sizes() {
     ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
     png.extend_from_slice(&13u32.to_be_bytes());
     png.extend_from_slice(&ihdr);
-    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    png.extend_from_slice(&test_support::png_crc32(&ihdr).to_be_bytes());
     for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
         png.extend_from_slice(&0u32.to_be_bytes());
         png.extend_from_slice(chunk);
-        png.extend_from_slice(&crc32(chunk).to_be_bytes());
+        png.extend_from_slice(&test_support::png_crc32(chunk).to_be_bytes());
     }
     std::fs::write(&path, &png).unwrap();
     let camera = camera(20, 10, ValidRegion::Full);
     let err = Image::load(&path, &camera, None).unwrap_err();
     assert!(matches!(err, FrameError::TooManyPixels { .. }), "{err}");
-}
-
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            crc = if crc & 1 == 1 {
-                (crc >> 1) ^ 0xEDB8_8320
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
 }
 
 /// Buffers of the wrong length are refused; invalid pixels read as 0.

@@ -1,5 +1,6 @@
 //! Helpers shared by the workspace's integration tests: where the workspace and the
-//! shared real data are. A dev-dependency only, never published.
+//! shared real data are, and the CRC of PNG chunks. A dev-dependency only, never
+//! published.
 #![deny(missing_docs)]
 
 use std::path::PathBuf;
@@ -27,4 +28,21 @@ pub fn data_dir() -> Option<PathBuf> {
         );
         None
     }
+}
+
+/// The CRC-32 of PNG chunks (ISO 3309), bit by bit: for tests that rewrite a PNG's
+/// header.
+pub fn png_crc32(bytes: &[u8]) -> u32 {
+    let mut crc = u32::MAX;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
 }

@@ -190,7 +190,7 @@ fn toml_round_trip_with_distortion_skew_and_mask() {
     assert_eq!(&bytes[12..16], b"IHDR");
     bytes[16..20].copy_from_slice(&100_000u32.to_be_bytes());
     bytes[20..24].copy_from_slice(&100_000u32.to_be_bytes());
-    let crc = crc32(&bytes[12..29]);
+    let crc = test_support::png_crc32(&bytes[12..29]);
     bytes[29..33].copy_from_slice(&crc.to_be_bytes());
     std::fs::write(&png, &bytes).unwrap();
     assert!(matches!(
@@ -201,22 +201,6 @@ fn toml_round_trip_with_distortion_skew_and_mask() {
         })
     ));
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-/// The CRC-32 of PNG chunks (ISO 3309), bit by bit.
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = u32::MAX;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            crc = if crc & 1 == 1 {
-                (crc >> 1) ^ 0xEDB8_8320
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
 }
 
 #[test]
