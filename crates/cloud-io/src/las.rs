@@ -51,6 +51,13 @@ pub struct LasInfo {
     pub grid: LasGrid,
 }
 
+fn io_error(path: &Path) -> impl Fn(std::io::Error) -> CloudIoError + Copy + '_ {
+    move |source| CloudIoError::Io {
+        path: path.to_owned(),
+        source,
+    }
+}
+
 fn las_error(path: &Path) -> impl Fn(las::Error) -> CloudIoError + '_ {
     move |source| CloudIoError::Las {
         path: path.to_owned(),
@@ -66,10 +73,7 @@ fn check_laz_items(
     raw: &las::raw::Header,
 ) -> Result<Option<laz::LazVlr>, CloudIoError> {
     use std::io::{Seek, SeekFrom};
-    let io_error = |source| CloudIoError::Io {
-        path: path.to_owned(),
-        source,
-    };
+    let io_error = io_error(path);
     let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(io_error)?);
     file.seek(SeekFrom::Start(u64::from(raw.header_size)))
         .map_err(io_error)?;
@@ -94,7 +98,7 @@ fn check_laz_items(
 /// The most bytes a LAZ chunk may decompress to: the `laz` crate sizes its buffers
 /// from the chunk's point count (the laszip record's `chunk_size`, or the chunk
 /// table's counts) before it decodes anything. LASzip writes 50 000 points a chunk
-/// (about 1.7 MB of format-2 points); a chunk may hold at most 64 MiB, or 256 times
+/// (1.3 MB of format-2 points); a chunk may hold at most 64 MiB, or 256 times
 /// the file's size (LAZ compresses points 5 to 15 times), whichever is larger.
 fn laz_chunk_budget(file_bytes: u64) -> u64 {
     (64u64 << 20).max(file_bytes.saturating_mul(256))
@@ -111,10 +115,7 @@ fn check_laz_chunks(
     file_bytes: u64,
 ) -> Result<(), CloudIoError> {
     use std::io::{Seek, SeekFrom};
-    let io_error = |source| CloudIoError::Io {
-        path: path.to_owned(),
-        source,
-    };
+    let io_error = io_error(path);
     let mut file = std::io::BufReader::new(std::fs::File::open(path).map_err(io_error)?);
     file.seek(SeekFrom::Start(data_start)).map_err(io_error)?;
     let Ok(table) = laz::laszip::ChunkTable::read_from(&mut file, laszip) else {
@@ -157,10 +158,7 @@ fn check_evlr(path: &Path, raw: &las::raw::Header, file_bytes: u64) -> Result<()
     let Some(evlr) = raw.evlr else {
         return Ok(());
     };
-    let io_error = |source| CloudIoError::Io {
-        path: path.to_owned(),
-        source,
-    };
+    let io_error = io_error(path);
     // The record's header: reserved (2), user id (16), record id (2), the length (8),
     // a description (32).
     const HEADER_BYTES: u64 = 60;
@@ -201,10 +199,7 @@ fn check_laz_chunk_table(
     file_bytes: u64,
 ) -> Result<(), CloudIoError> {
     use std::io::{Read, Seek, SeekFrom};
-    let io_error = |source| CloudIoError::Io {
-        path: path.to_owned(),
-        source,
-    };
+    let io_error = io_error(path);
     let mut file = std::fs::File::open(path).map_err(io_error)?;
     let read_i64 = |file: &mut std::fs::File, at: SeekFrom| -> std::io::Result<i64> {
         file.seek(at)?;
@@ -374,10 +369,7 @@ fn decode_points(
 
 /// Read a LAS or LAZ file's points.
 pub(crate) fn read(path: &Path) -> Result<(Points, LasInfo), CloudIoError> {
-    let io_error = |source| CloudIoError::Io {
-        path: path.to_owned(),
-        source,
-    };
+    let io_error = io_error(path);
     let file_bytes = std::fs::metadata(path).map_err(io_error)?.len();
     let raw = std::fs::File::open(path)
         .map_err(io_error)

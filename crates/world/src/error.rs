@@ -33,6 +33,10 @@ pub enum WorldError {
     /// A trajectory or acquisition setting is invalid.
     #[error("sequence: {0}")]
     Sequence(String),
+    /// A rendering or picture that is not of its camera's size, or whose buffers do not
+    /// hold a value per pixel.
+    #[error(transparent)]
+    Picture(#[from] frame::FrameError),
     /// The generated points do not make a cloud (more than the renderer handles).
     #[error(transparent)]
     Cloud(#[from] splat::SplatError),

@@ -421,8 +421,9 @@ impl Acquisition {
     /// The picture a camera would acquire where `rendered` was rendered, for frame
     /// `index` at time `time_s`: every pixel of the camera's valid region is a
     /// measurement (the sky included, as a real camera sees it), degraded as the module
-    /// documentation says. Fails on settings [`Acquisition::validate`] refuses, and on a
-    /// rendering that is not of `camera`'s size (or whose buffers are not).
+    /// documentation says. Fails on settings [`Acquisition::validate`] refuses
+    /// ([`WorldError::Sequence`]), and on a rendering that is not of `camera`'s size or
+    /// whose buffers are not ([`WorldError::Picture`]).
     pub fn acquire(
         &self,
         rendered: &Frame,
@@ -431,9 +432,7 @@ impl Acquisition {
         time_s: f64,
     ) -> Result<Image, WorldError> {
         self.validate()?;
-        rendered
-            .check_size("rendering to acquire", camera)
-            .map_err(|e| WorldError::Sequence(e.to_string()))?;
+        rendered.check_size("rendering to acquire", camera)?;
         if !time_s.is_finite() {
             return Err(WorldError::Sequence(format!(
                 "acquisition time must be finite, got {time_s}"
@@ -482,7 +481,7 @@ impl Acquisition {
             intensity,
             valid.to_vec(),
         )
-        .map_err(|e| WorldError::Sequence(e.to_string()))
+        .map_err(WorldError::from)
     }
 }
 

@@ -1,9 +1,9 @@
 //! The sequence generator: trajectory, shaking, acquired images.
 
-use frame::{Frame, Image, PixelStatus};
+use frame::{Frame, FrameError, Image, PixelStatus};
 use test_support::workspace_root as root;
 use ucm::Camera;
-use world::{Acquisition, Shake, Trajectory, Turn};
+use world::{Acquisition, Shake, Trajectory, Turn, WorldError};
 
 fn camera() -> Camera {
     Camera::load_toml(root().join("fixtures/omni-320x240.toml")).unwrap()
@@ -261,26 +261,30 @@ fn acquisition_degrades_like_a_camera() {
     // blur of 1e12 pixels would allocate terabytes) and a time that is not finite are
     // errors, not panics.
     let small = Frame::new(4, 4);
-    assert!(
-        Acquisition::default()
-            .acquire(&small, &camera, 0, 0.0)
-            .is_err()
-    );
+    assert!(matches!(
+        Acquisition::default().acquire(&small, &camera, 0, 0.0),
+        Err(WorldError::Picture(FrameError::Size { .. }))
+    ));
     let mut shortened = flat.clone();
     shortened.intensity.truncate(10);
-    assert!(
-        Acquisition::default()
-            .acquire(&shortened, &camera, 0, 0.0)
-            .is_err()
-    );
+    assert!(matches!(
+        Acquisition::default().acquire(&shortened, &camera, 0, 0.0),
+        Err(WorldError::Picture(FrameError::Length {
+            what: "intensity",
+            got: 10,
+            ..
+        }))
+    ));
     let wide_blur = Acquisition {
         blur_sigma_px: 1e12,
         ..Acquisition::default()
     };
-    assert!(wide_blur.acquire(&flat, &camera, 0, 0.0).is_err());
-    assert!(
-        Acquisition::default()
-            .acquire(&flat, &camera, 0, f64::NAN)
-            .is_err()
-    );
+    assert!(matches!(
+        wide_blur.acquire(&flat, &camera, 0, 0.0),
+        Err(WorldError::Sequence(_))
+    ));
+    assert!(matches!(
+        Acquisition::default().acquire(&flat, &camera, 0, f64::NAN),
+        Err(WorldError::Sequence(_))
+    ));
 }

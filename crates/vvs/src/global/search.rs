@@ -1032,32 +1032,20 @@ mod tests {
         // A grid node of 2 m × 2 m × 1.5 m is at most this far from the truth.
         let near_pose =
             truth * Isometry3::from_pose_vector([0.8, -0.7, 0.6, 0.0, 0.0, 0.0]).unwrap();
+        // Both scores of every orientation at a node, compared as `compared` says.
         let mut scores = Scores::new(angles.len());
-        servo
-            .search_cost(
-                search,
-                &near_pose,
-                lambda,
-                &o,
-                Compared::Bounded(f64::INFINITY),
-                &mut scores,
-            )
-            .unwrap();
-        let unbounded = (scores.costs.clone(), scores.squared.clone());
-        let near = [scores.costs[identity], scores.squared[identity]];
+        let mut score = |pose: &Isometry3, compared| {
+            servo
+                .search_cost(search, pose, lambda, &o, compared, &mut scores)
+                .unwrap();
+            (scores.costs.clone(), scores.squared.clone())
+        };
+        let unbounded = score(&near_pose, Compared::Bounded(f64::INFINITY));
+        let near = [unbounded.0[identity], unbounded.1[identity]];
         // One orientation alone: its bits, the others not compared.
-        servo
-            .search_cost(
-                search,
-                &near_pose,
-                lambda,
-                &o,
-                Compared::Only(identity),
-                &mut scores,
-            )
-            .unwrap();
+        let only = score(&near_pose, Compared::Only(identity));
         for k in 0..angles.len() {
-            let (cost, squared) = (scores.costs[k], scores.squared[k]);
+            let (cost, squared) = (only.0[k], only.1[k]);
             if k == identity {
                 assert_eq!(cost.to_bits(), unbounded.0[k].to_bits());
                 assert_eq!(squared.to_bits(), unbounded.1[k].to_bits());
@@ -1071,19 +1059,10 @@ mod tests {
         // A finite bound: each orientation scores as without it, or is skipped and
         // would have scored above it on both lists (the screening's claim).
         for bound in [0.0, 0.5] {
-            servo
-                .search_cost(
-                    search,
-                    &near_pose,
-                    lambda,
-                    &o,
-                    Compared::Bounded(bound),
-                    &mut scores,
-                )
-                .unwrap();
+            let bounded = score(&near_pose, Compared::Bounded(bound));
             let mut skipped = 0;
             for k in 0..angles.len() {
-                let (cost, squared) = (scores.costs[k], scores.squared[k]);
+                let (cost, squared) = (bounded.0[k], bounded.1[k]);
                 if cost.is_infinite() && unbounded.0[k].is_finite() {
                     skipped += 1;
                     assert!(
@@ -1110,18 +1089,9 @@ mod tests {
         let above =
             Isometry3::from_pose_vector([54.758, -4.8946, 17.917, -2.65819, 0.72759, -0.48506])
                 .unwrap();
-        servo
-            .search_cost(
-                search,
-                &above,
-                lambda,
-                &o,
-                Compared::Bounded(f64::INFINITY),
-                &mut scores,
-            )
-            .unwrap();
+        let (costs, squared) = score(&above, Compared::Bounded(f64::INFINITY));
         let best = |scores: &[f64]| scores.iter().copied().fold(f64::INFINITY, f64::min);
-        let above = [best(&scores.costs), best(&scores.squared)];
+        let above = [best(&costs), best(&squared)];
         assert!(above.iter().all(|s| s.is_finite()), "{above:?}");
         eprintln!("near the truth: {near:?}; above the roofs, the best orientation: {above:?}");
         for list in 0..2 {
